@@ -1,0 +1,33 @@
+"""websim's simulation core: a differential-drive robot, its LiDAR and its world, on pymunk.
+
+Pure computation: no ROS, network, threads or plotting. Units are SI (m, s, rad, kg, N).
+"""
+
+from physics.lidar import Lidar
+from physics.params import LidarParams, NoiseParams, PlatformParams, RobotParams, load_params
+from physics.robot import MODES, MobileRobotPhysics
+from physics.simulation import TICK_PERIOD_S, Simulation
+from physics.snapshots import Command, LaserScan, Odometry, Pose2D, RobotState
+from physics.validation import ConfigError
+from physics.world import World, load_world
+
+__all__ = [
+    "MODES",
+    "TICK_PERIOD_S",
+    "Command",
+    "ConfigError",
+    "LaserScan",
+    "Lidar",
+    "LidarParams",
+    "MobileRobotPhysics",
+    "NoiseParams",
+    "Odometry",
+    "PlatformParams",
+    "Pose2D",
+    "RobotParams",
+    "RobotState",
+    "Simulation",
+    "World",
+    "load_params",
+    "load_world",
+]

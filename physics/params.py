@@ -1,0 +1,237 @@
+"""Robot, LiDAR and noise parameters: frozen dataclasses loaded from YAML.
+
+``config/pi4b_params.yaml`` is the single source of the platform's numbers: the dataclasses
+below take their defaults from it, so ``RobotParams()`` is the Pi 4B robot and no constant is
+written twice. All values are SI: metres, seconds, radians, kilograms, newtons.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import yaml
+
+from physics.validation import (
+    ConfigError,
+    as_finite_float,
+    as_mapping,
+    as_non_negative_float,
+    as_positive_float,
+    check_keys,
+    fail,
+)
+
+PROJECT_DIR = Path(__file__).resolve().parent.parent
+"""The checkout (or editable install) that holds ``config/`` and ``worlds/``."""
+
+SHIPPED_PARAMS_FILE = PROJECT_DIR / "config" / "pi4b_params.yaml"
+"""The Pi 4B parameter file whose values are every dataclass default."""
+
+NO_RETURN_POLICIES = ("range_max", "inf")
+"""What a ray that hits nothing reports: ``range_max`` (course platform) or ``inf`` (REP 117)."""
+
+
+@functools.cache
+def _shipped_defaults() -> Mapping[str, Mapping[str, Any]]:
+    """Read the shipped parameter file once; sections are read-only mappings."""
+    with SHIPPED_PARAMS_FILE.open(encoding="utf-8") as stream:
+        document = yaml.safe_load(stream)
+    return MappingProxyType({name: MappingProxyType(dict(section))
+                             for name, section in document.items()})
+
+
+def _shipped(section: str, name: str) -> Any:
+    """A dataclass field whose default is ``name`` in ``section`` of the shipped file."""
+    return field(default_factory=lambda: _shipped_defaults()[section][name])
+
+
+@dataclass(frozen=True)
+class RobotParams:
+    """Physical parameters of the differential-drive robot.
+
+    Attributes:
+        mass_kg: chassis mass with battery, Pi 4B and lidar (kg).
+        wheel_radius_m: drive wheel radius (m).
+        wheelbase_m: distance between the two drive wheels (m).
+        inertia_kg_m2: yaw moment of inertia about the centre (kg m^2).
+        max_linear_mps: linear velocity limit; commands are clamped to it (m/s).
+        max_angular_rps: angular velocity limit; commands are clamped to it (rad/s).
+        max_wheel_force_n: traction force limit per wheel in dynamic mode (N).
+        footprint_radius_m: radius of the circular collision footprint (m).
+    """
+
+    mass_kg: float = _shipped("robot", "mass_kg")
+    wheel_radius_m: float = _shipped("robot", "wheel_radius_m")
+    wheelbase_m: float = _shipped("robot", "wheelbase_m")
+    inertia_kg_m2: float = _shipped("robot", "inertia_kg_m2")
+    max_linear_mps: float = _shipped("robot", "max_linear_mps")
+    max_angular_rps: float = _shipped("robot", "max_angular_rps")
+    max_wheel_force_n: float = _shipped("robot", "max_wheel_force_n")
+    footprint_radius_m: float = _shipped("robot", "footprint_radius_m")
+
+    def __post_init__(self) -> None:
+        for item in dataclasses.fields(self):
+            value = as_positive_float(item.name, getattr(self, item.name))
+            object.__setattr__(self, item.name, value)
+
+    @property
+    def half_wheelbase_m(self) -> float:
+        """Distance from the centre to each wheel (m)."""
+        return 0.5 * self.wheelbase_m
+
+    @property
+    def max_wheel_rim_speed_mps(self) -> float:
+        """Wheel rim speed needed at both velocity limits at once (m/s)."""
+        return self.max_linear_mps + self.max_angular_rps * self.half_wheelbase_m
+
+    @property
+    def max_wheel_speed_rad_s(self) -> float:
+        """Wheel angular speed needed at both velocity limits at once (rad/s)."""
+        return self.max_wheel_rim_speed_mps / self.wheel_radius_m
+
+    @property
+    def max_linear_accel_mps2(self) -> float:
+        """Largest forward acceleration the two wheels' traction allows (m/s^2)."""
+        return 2.0 * self.max_wheel_force_n / self.mass_kg
+
+    @property
+    def max_angular_accel_rps2(self) -> float:
+        """Largest yaw acceleration the two wheels' traction allows (rad/s^2)."""
+        return self.max_wheel_force_n * self.wheelbase_m / self.inertia_kg_m2
+
+
+@dataclass(frozen=True)
+class LidarParams:
+    """A 2D LiDAR shaped like ``sensor_msgs/LaserScan`` (defaults: RPLIDAR A1-like).
+
+    Attributes:
+        num_rays: beams per scan; the increment is 2*pi / num_rays, so a full turn is covered
+            without counting any direction twice.
+        angle_min_rad: angle of the first beam in the laser frame (rad).
+        range_min_m: hits closer than this cannot be measured (m); see ``Lidar``.
+        range_max_m: longest measurable range (m).
+        scan_time_s: time for one full scan (s); also the publishing period.
+        mount_x_m: laser position in base_link, forward (m).
+        mount_y_m: laser position in base_link, left (m).
+        mount_yaw_rad: laser yaw in base_link (rad).
+        no_return: what a ray that hits nothing within range_max reports: ``"range_max"`` (the
+            course platform's behaviour, the default) or ``"inf"`` (REP 117).
+    """
+
+    num_rays: int = _shipped("lidar", "num_rays")
+    angle_min_rad: float = _shipped("lidar", "angle_min_rad")
+    range_min_m: float = _shipped("lidar", "range_min_m")
+    range_max_m: float = _shipped("lidar", "range_max_m")
+    scan_time_s: float = _shipped("lidar", "scan_time_s")
+    mount_x_m: float = _shipped("lidar", "mount_x_m")
+    mount_y_m: float = _shipped("lidar", "mount_y_m")
+    mount_yaw_rad: float = _shipped("lidar", "mount_yaw_rad")
+    no_return: str = _shipped("lidar", "no_return")
+
+    def __post_init__(self) -> None:
+        if isinstance(self.num_rays, bool) or not isinstance(self.num_rays, int) \
+                or self.num_rays < 1:
+            raise fail("num_rays", f"must be a whole number >= 1, got {self.num_rays!r}")
+        for name in ("angle_min_rad", "mount_x_m", "mount_y_m", "mount_yaw_rad"):
+            object.__setattr__(self, name, as_finite_float(name, getattr(self, name)))
+        for name in ("range_min_m",):
+            object.__setattr__(self, name, as_non_negative_float(name, getattr(self, name)))
+        for name in ("range_max_m", "scan_time_s"):
+            object.__setattr__(self, name, as_positive_float(name, getattr(self, name)))
+        if self.range_min_m >= self.range_max_m:
+            raise fail("range_min_m", f"must be < range_max_m ({self.range_max_m!r}), "
+                                      f"got {self.range_min_m!r}")
+        if self.no_return not in NO_RETURN_POLICIES:
+            raise fail("no_return", f"must be one of {', '.join(NO_RETURN_POLICIES)}, "
+                                    f"got {self.no_return!r}")
+
+    @property
+    def angle_increment_rad(self) -> float:
+        """Angle between neighbouring beams (rad): 2*pi / num_rays."""
+        return 2.0 * math.pi / self.num_rays
+
+    @property
+    def angle_max_rad(self) -> float:
+        """Angle of the last beam: angle_min + (num_rays - 1) * increment (rad)."""
+        return self.angle_min_rad + (self.num_rays - 1) * self.angle_increment_rad
+
+    @property
+    def time_increment_s(self) -> float:
+        """Time between measurements: scan_time / num_rays (s)."""
+        return self.scan_time_s / self.num_rays
+
+    @property
+    def no_return_range_m(self) -> float:
+        """The value reported for a ray that hits nothing (m)."""
+        return self.range_max_m if self.no_return == "range_max" else math.inf
+
+
+@dataclass(frozen=True)
+class NoiseParams:
+    """Gaussian noise standard deviations; zero means noiseless (the default).
+
+    Attributes:
+        odom_linear_sigma_mps: on the linear speed that odometry integrates, per tick (m/s).
+        odom_angular_sigma_rps: on the yaw rate that odometry integrates, per tick (rad/s).
+        scan_sigma_m: on every lidar hit (m); no-return and too-close readings stay exact.
+    """
+
+    odom_linear_sigma_mps: float = _shipped("noise", "odom_linear_sigma_mps")
+    odom_angular_sigma_rps: float = _shipped("noise", "odom_angular_sigma_rps")
+    scan_sigma_m: float = _shipped("noise", "scan_sigma_m")
+
+    def __post_init__(self) -> None:
+        for item in dataclasses.fields(self):
+            value = as_non_negative_float(item.name, getattr(self, item.name))
+            object.__setattr__(self, item.name, value)
+
+
+@dataclass(frozen=True)
+class PlatformParams:
+    """Everything a parameter file holds: the robot, its LiDAR and the noise model."""
+
+    robot: RobotParams = field(default_factory=RobotParams)
+    lidar: LidarParams = field(default_factory=LidarParams)
+    noise: NoiseParams = field(default_factory=NoiseParams)
+
+
+_SECTIONS: Mapping[str, type[RobotParams] | type[LidarParams] | type[NoiseParams]] = \
+    MappingProxyType({"robot": RobotParams, "lidar": LidarParams, "noise": NoiseParams})
+
+
+def load_params(path: str | Path) -> PlatformParams:
+    """Load a parameter file such as ``config/pi4b_params.yaml``.
+
+    Sections and keys that are left out keep the shipped defaults.
+
+    Raises:
+        ConfigError: the file is unreadable, not YAML, or holds an unknown or invalid entry;
+            the message names the file and the entry.
+    """
+    source = str(path)
+    try:
+        with open(path, encoding="utf-8") as stream:
+            document = yaml.safe_load(stream)
+    except OSError as error:
+        raise ConfigError(f"{source}: cannot read parameter file: {error.strerror}") from None
+    except yaml.YAMLError as error:
+        raise ConfigError(f"{source}: not valid YAML: {error}") from None
+    document = {} if document is None else as_mapping(source, document)
+    check_keys(source, document, _SECTIONS)
+    sections: dict[str, Any] = {}
+    for name, cls in _SECTIONS.items():
+        where = f"{source}: {name}"
+        values = as_mapping(where, document.get(name) or {})
+        check_keys(where, values, [item.name for item in dataclasses.fields(cls)])
+        try:
+            sections[name] = cls(**values)
+        except ConfigError as error:
+            raise ConfigError(f"{where}.{error}") from None
+    return PlatformParams(**sections)

@@ -1,0 +1,251 @@
+"""Worlds: YAML files of walls and obstacles, loaded into immutable dataclasses.
+
+The format (every coordinate in the ``map`` frame, metres and radians)::
+
+    name: maze                   # optional, shown in the browser
+    start: [x, y, theta]         # spawn pose; default [0, 0, 0]
+    walls:                       # thin line segments
+      - [x1, y1, x2, y2]
+    polylines:                   # chains of thin walls
+      - {points: [[x, y], ...], closed: false}
+    boxes:                       # solid rectangles
+      - {center: [x, y], size: [width, height], yaw: 0.0}
+    circles:                     # solid discs
+      - {center: [x, y], radius: r}
+
+Boxes and polylines become wall segments; circles stay circles. Every error raises
+``ConfigError`` naming the file and the entry, e.g. ``worlds/maze.yaml: walls[3]: ...``.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from physics.params import PROJECT_DIR
+from physics.snapshots import Pose2D
+from physics.validation import (
+    ConfigError,
+    as_finite_float,
+    as_mapping,
+    as_number_list,
+    as_positive_float,
+    check_keys,
+    fail,
+)
+
+WORLDS_DIR = PROJECT_DIR / "worlds"
+"""Where the shipped worlds live; ``load_world("maze")`` looks here."""
+
+MIN_WALL_LENGTH_M = 1e-6
+"""Shorter walls are refused: they have no direction, and the ray-cast normal is undefined."""
+
+_TOP_LEVEL_KEYS = ("name", "start", "walls", "polylines", "boxes", "circles")
+
+
+@dataclass(frozen=True)
+class Wall:
+    """A thin wall segment in the map frame.
+
+    Attributes:
+        x1: first end x (m).
+        y1: first end y (m).
+        x2: second end x (m).
+        y2: second end y (m).
+        origin: the file entry it came from, e.g. ``"boxes[2]"``, for error messages.
+    """
+
+    x1: float
+    y1: float
+    x2: float
+    y2: float
+    origin: str
+
+    @property
+    def length_m(self) -> float:
+        """Length of the segment (m)."""
+        return math.hypot(self.x2 - self.x1, self.y2 - self.y1)
+
+
+@dataclass(frozen=True)
+class CircleObstacle:
+    """A solid disc in the map frame.
+
+    Attributes:
+        x: centre x (m).
+        y: centre y (m).
+        radius_m: radius (m).
+        origin: the file entry it came from, e.g. ``"circles[0]"``.
+    """
+
+    x: float
+    y: float
+    radius_m: float
+    origin: str
+
+
+@dataclass(frozen=True)
+class World:
+    """An immutable world.
+
+    Attributes:
+        name: a short display name.
+        start: spawn pose in the map frame.
+        walls: every wall segment, boxes and polylines included.
+        circles: every solid disc.
+        source: the file it was loaded from (or a label), for error messages.
+    """
+
+    name: str
+    start: Pose2D
+    walls: tuple[Wall, ...]
+    circles: tuple[CircleObstacle, ...]
+    source: str
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """Axis-aligned bounds ``(min_x, min_y, max_x, max_y)`` of all shapes and the start (m)."""
+        xs = [self.start.x]
+        ys = [self.start.y]
+        for wall in self.walls:
+            xs += [wall.x1, wall.x2]
+            ys += [wall.y1, wall.y2]
+        for circle in self.circles:
+            xs += [circle.x - circle.radius_m, circle.x + circle.radius_m]
+            ys += [circle.y - circle.radius_m, circle.y + circle.radius_m]
+        return min(xs), min(ys), max(xs), max(ys)
+
+
+def resolve_world_path(name_or_path: str | Path) -> Path:
+    """Return the file for a path, or for the name of a shipped world (``"maze"``)."""
+    path = Path(name_or_path)
+    if path.exists() or path.suffix or len(path.parts) > 1:
+        return path
+    return WORLDS_DIR / f"{path}.yaml"
+
+
+def load_world(path: str | Path) -> World:
+    """Load and validate a world file (or a shipped world by name, e.g. ``"maze"``).
+
+    Raises:
+        ConfigError: unreadable file, bad YAML, or an invalid entry; the message names both.
+    """
+    resolved = resolve_world_path(path)
+    source = str(path)
+    try:
+        with resolved.open(encoding="utf-8") as stream:
+            document = yaml.safe_load(stream)
+    except OSError as error:
+        known = ", ".join(sorted(p.stem for p in WORLDS_DIR.glob("*.yaml")))
+        raise ConfigError(f"{source}: cannot read world file: {error.strerror} "
+                          f"(shipped worlds: {known})") from None
+    except yaml.YAMLError as error:
+        raise ConfigError(f"{source}: not valid YAML: {error}") from None
+    return world_from_dict(document, source=source)
+
+
+def world_from_dict(document: Any, *, source: str = "<world>") -> World:
+    """Validate a parsed world document (the YAML format above) and build a ``World``."""
+    top = as_mapping(source, {} if document is None else document)
+    check_keys(source, top, _TOP_LEVEL_KEYS)
+    name = top.get("name", Path(source).stem)
+    if not isinstance(name, str):
+        raise fail(f"{source}: name", f"expected text, got {name!r}")
+    start = Pose2D(*as_number_list(f"{source}: start", top.get("start", [0, 0, 0]), 3))
+
+    walls: list[Wall] = []
+    for index, entry in enumerate(_as_list(source, top, "walls")):
+        where = f"walls[{index}]"
+        x1, y1, x2, y2 = as_number_list(f"{source}: {where}", entry, 4)
+        walls.append(_checked_wall(source, Wall(x1, y1, x2, y2, where)))
+    for index, entry in enumerate(_as_list(source, top, "polylines")):
+        walls += _polyline_walls(source, f"polylines[{index}]", entry)
+    boxes = [_box_corners(source, f"boxes[{index}]", entry)
+             for index, entry in enumerate(_as_list(source, top, "boxes"))]
+    for where, corners in boxes:
+        for side in range(4):
+            (ax, ay), (bx, by) = corners[side], corners[(side + 1) % 4]
+            walls.append(Wall(ax, ay, bx, by, where))
+    circles = [_circle(source, f"circles[{index}]", entry)
+               for index, entry in enumerate(_as_list(source, top, "circles"))]
+
+    for where, corners in boxes:
+        if _inside_convex(corners, start.x, start.y):
+            raise fail(f"{source}: start", f"{list(start)} is inside the box {where}")
+    for circle in circles:
+        if math.hypot(start.x - circle.x, start.y - circle.y) < circle.radius_m:
+            raise fail(f"{source}: start", f"{list(start)} is inside the circle {circle.origin}")
+    return World(name=name, start=start, walls=tuple(walls), circles=tuple(circles),
+                 source=source)
+
+
+def _as_list(source: str, top: Any, key: str) -> list[Any]:
+    value = top.get(key, [])
+    if value is None:
+        return []
+    if not isinstance(value, list):
+        raise fail(f"{source}: {key}", f"expected a list, got {type(value).__name__} {value!r}")
+    return value
+
+
+def _checked_wall(source: str, wall: Wall) -> Wall:
+    if wall.length_m < MIN_WALL_LENGTH_M:
+        raise fail(f"{source}: {wall.origin}", "zero-length wall "
+                   f"[{wall.x1}, {wall.y1}, {wall.x2}, {wall.y2}]")
+    return wall
+
+
+def _polyline_walls(source: str, where: str, entry: Any) -> list[Wall]:
+    mapping = as_mapping(f"{source}: {where}", entry)
+    check_keys(f"{source}: {where}", mapping, ("points", "closed"))
+    raw_points = mapping.get("points")
+    if not isinstance(raw_points, list) or len(raw_points) < 2:
+        raise fail(f"{source}: {where}.points", f"expected a list of 2 or more [x, y] points, "
+                   f"got {raw_points!r}")
+    points = [as_number_list(f"{source}: {where}.points[{i}]", point, 2)
+              for i, point in enumerate(raw_points)]
+    closed = mapping.get("closed", False)
+    if not isinstance(closed, bool):
+        raise fail(f"{source}: {where}.closed", f"expected true or false, got {closed!r}")
+    if closed and len(points) >= 3:
+        points.append(points[0])
+    return [_checked_wall(source, Wall(a[0], a[1], b[0], b[1], f"{where}.points[{i}]"))
+            for i, (a, b) in enumerate(itertools.pairwise(points))]
+
+
+def _box_corners(source: str, where: str, entry: Any) -> tuple[str, list[tuple[float, float]]]:
+    mapping = as_mapping(f"{source}: {where}", entry)
+    check_keys(f"{source}: {where}", mapping, ("center", "size", "yaw"))
+    cx, cy = as_number_list(f"{source}: {where}.center", mapping.get("center"), 2)
+    width, height = as_number_list(f"{source}: {where}.size", mapping.get("size"), 2)
+    for label, value in (("width", width), ("height", height)):
+        if value <= 0.0:
+            raise fail(f"{source}: {where}.size", f"{label} must be > 0, got {value!r}")
+    yaw = as_finite_float(f"{source}: {where}.yaw", mapping.get("yaw", 0.0))
+    cos_yaw, sin_yaw = math.cos(yaw), math.sin(yaw)
+    corners = []
+    for ux, uy in ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)):
+        dx, dy = ux * width, uy * height
+        corners.append((cx + cos_yaw * dx - sin_yaw * dy, cy + sin_yaw * dx + cos_yaw * dy))
+    return where, corners
+
+
+def _circle(source: str, where: str, entry: Any) -> CircleObstacle:
+    mapping = as_mapping(f"{source}: {where}", entry)
+    check_keys(f"{source}: {where}", mapping, ("center", "radius"))
+    x, y = as_number_list(f"{source}: {where}.center", mapping.get("center"), 2)
+    radius = as_positive_float(f"{source}: {where}.radius", mapping.get("radius"))
+    return CircleObstacle(x, y, radius, where)
+
+
+def _inside_convex(corners: list[tuple[float, float]], x: float, y: float) -> bool:
+    """True if (x, y) is strictly inside the counter-clockwise convex polygon ``corners``."""
+    for (ax, ay), (bx, by) in zip(corners, corners[1:] + corners[:1], strict=True):
+        if (bx - ax) * (y - ay) - (by - ay) * (x - ax) <= 0.0:
+            return False
+    return True

@@ -1,0 +1,37 @@
+"""The ``websim`` command, called in-process through ``main(argv)``."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from websim.cli import main
+
+
+def test_help_lists_subcommands(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as caught:
+        main(["--help"])
+    assert caught.value.code == 0
+    assert "demo" in capsys.readouterr().out
+
+
+def test_demo_prints_odometry_of_the_commanded_motion(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--seconds", "2", "--linear", "0.2", "--angular", "0"]) == 0
+    rows = [line.split() for line in capsys.readouterr().out.splitlines()[1:]]
+    assert [float(row[0]) for row in rows] == [0.5, 1.0, 1.5, 2.0]
+    assert float(rows[-1][1]) == pytest.approx(0.4, abs=1e-4)
+
+
+def test_bad_world_is_a_one_line_error(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--world", "nowhere"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("websim: error: nowhere: cannot read world file")
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_console_script_is_installed() -> None:
+    result = subprocess.run([sys.executable, "-m", "websim.cli", "--help"],
+                            capture_output=True, text=True, check=False)
+    assert result.returncode == 0 and "usage: websim" in result.stdout

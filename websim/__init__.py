@@ -1,0 +1,1 @@
+"""websim: the command-line entry points around the simulation core."""

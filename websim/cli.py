@@ -1,0 +1,80 @@
+"""The ``websim`` command: each subcommand is a function of parsed arguments -> exit code."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from physics import MODES, ConfigError, Simulation, load_params, load_world
+from physics.params import SHIPPED_PARAMS_FILE
+from physics.world import WORLDS_DIR
+
+DEFAULT_WORLD = str(WORLDS_DIR / "empty.yaml")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``websim`` and its subcommands."""
+    parser = argparse.ArgumentParser(
+        prog="websim", description="Browser-based 2D differential-drive robot simulator.")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    demo = commands.add_parser(
+        "demo", help="drive the robot headless and print odometry (no server)",
+        description="Drive a circle headless, faster than real time, printing odometry.")
+    _add_sim_arguments(demo)
+    demo.add_argument("--seconds", type=float, default=5.0, help="simulated time (default 5)")
+    demo.add_argument("--linear", type=float, default=0.3, help="linear.x in m/s (default 0.3)")
+    demo.add_argument("--angular", type=float, default=0.5,
+                      help="angular.z in rad/s (default 0.5)")
+    demo.set_defaults(run=_run_demo)
+    return parser
+
+
+def _add_sim_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--world", default=DEFAULT_WORLD,
+                        help="world file, or a shipped world's name (default: empty)")
+    parser.add_argument("--mode", choices=MODES, default="kinematic",
+                        help="motion model (default: kinematic)")
+    parser.add_argument("--params", default=str(SHIPPED_PARAMS_FILE),
+                        help="robot parameter file (default: config/pi4b_params.yaml)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed for noise (default 0)")
+
+
+def make_simulation(args: argparse.Namespace) -> Simulation:
+    """Build the simulation the common arguments describe."""
+    platform = load_params(args.params)
+    return Simulation(load_world(args.world), platform.robot, mode=args.mode, seed=args.seed,
+                      lidar=platform.lidar, noise=platform.noise)
+
+
+def _run_demo(args: argparse.Namespace) -> int:
+    sim = make_simulation(args)
+    sim.command(args.linear, args.angular)
+    print("t_s     odom_x_m  odom_y_m  odom_theta_rad  v_mps   omega_rps")
+    ticks_per_print = max(1, round(0.5 / sim.dt_s))
+    for _ in range(max(1, round(args.seconds / sim.dt_s))):
+        sim.step()
+        if sim.tick % ticks_per_print == 0:
+            odom = sim.odometry()
+            print(f"{sim.time_s:6.2f}  {odom.x:8.4f}  {odom.y:8.4f}  {odom.theta:14.4f}  "
+                  f"{odom.v:6.3f}  {odom.omega:9.3f}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``websim`` with ``argv`` (default: the process arguments); returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 0
+    try:
+        return int(args.run(args))
+    except ConfigError as error:
+        print(f"websim: error: {error}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
