@@ -27,3 +27,13 @@ def open_world() -> World:
 def make_sim(world: World, **kwargs: object) -> Simulation:
     params = kwargs.pop("params", None) or RobotParams()
     return Simulation(world, params, seed=0, **kwargs)  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="module")
+def server():
+    """A real ``websim serve`` on the empty world, shared by a test module."""
+    from server_process import start_server
+
+    running = start_server()
+    yield running
+    running.stop()

@@ -9,6 +9,8 @@ from collections.abc import Sequence
 from physics import MODES, ConfigError, Simulation, load_params, load_world
 from physics.params import SHIPPED_PARAMS_FILE
 from physics.world import WORLDS_DIR
+from ros_nodes.virtual_robot_core import VirtualRobot
+from websim import serve as serve_command
 
 DEFAULT_WORLD = str(WORLDS_DIR / "empty.yaml")
 
@@ -28,6 +30,14 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--angular", type=float, default=0.5,
                       help="angular.z in rad/s (default 0.5)")
     demo.set_defaults(run=_run_demo)
+
+    serve = commands.add_parser(
+        "serve", help="run the simulator in real time behind rosbridge, with the web pages",
+        description="Run the simulator in real time, speak the rosbridge v2 protocol on the "
+                    "WebSocket port and serve the web interface on the HTTP port.")
+    _add_sim_arguments(serve)
+    serve_command.add_arguments(serve)
+    serve.set_defaults(run=_run_serve)
     return parser
 
 
@@ -60,6 +70,10 @@ def _run_demo(args: argparse.Namespace) -> int:
             print(f"{sim.time_s:6.2f}  {odom.x:8.4f}  {odom.y:8.4f}  {odom.theta:14.4f}  "
                   f"{odom.v:6.3f}  {odom.omega:9.3f}")
     return 0
+
+
+def _run_serve(args: argparse.Namespace) -> int:
+    return serve_command.run(args, VirtualRobot(make_simulation(args)))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,0 +1,216 @@
+"""The one definition of every ROS message shape websim sends or reads, as plain dicts.
+
+Dicts are what rosbridge puts on the wire (JSON or CBOR), and what
+``rosidl_runtime_py.set_message_fields`` fills a real rclpy message from, so the embedded bridge
+and the rclpy node share these functions. Field names and nesting are those of ROS 2
+(``builtin_interfaces/Time`` is ``{sec, nanosec}``). Non-finite floats are the encoders' concern
+(see ``ros_nodes.rosbridge.encoding``); ``uint8[]`` fields are base64 strings, as rosbridge
+sends them.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from physics import ConfigError, LaserScan, Odometry, World
+from physics.validation import as_finite_float
+
+Message = dict[str, Any]
+
+
+class Float32Sequence(list[float]):
+    """A ``float32[]`` field (e.g. ``LaserScan.ranges``): a list that encoders may pack."""
+
+ODOM_FRAME = "odom"
+BASE_FRAME = "base_link"
+LASER_FRAME = "laser"
+MAP_FRAME = "map"
+
+UNUSED_COVARIANCE = 1e6
+"""Variance of the degrees of freedom a planar robot does not measure (z, roll, pitch)."""
+
+ODOM_POSE_VARIANCE = 1e-3
+"""Variance reported for odometry x, y and yaw when no noise model says otherwise (m^2, rad^2)."""
+
+ODOM_TWIST_VARIANCE = 1e-4
+"""Variance reported for odometry speeds when no noise model says otherwise."""
+
+
+def normalize_type(type_name: str) -> str:
+    """``pkg/Type`` or ``pkg/msg/Type`` (or ``srv``) -> the ROS 2 spelling ``pkg/msg/Type``."""
+    parts = type_name.strip("/").split("/")
+    if len(parts) == 2 and all(parts):
+        return f"{parts[0]}/msg/{parts[1]}"
+    if len(parts) == 3 and all(parts) and parts[1] in ("msg", "srv", "action"):
+        return "/".join(parts)
+    raise ValueError(f"not a ROS type name: {type_name!r} (expected pkg/msg/Type)")
+
+
+def normalize_service_type(type_name: str) -> str:
+    """``pkg/Type`` or ``pkg/srv/Type`` -> ``pkg/srv/Type``."""
+    parts = type_name.strip("/").split("/")
+    if len(parts) == 2 and all(parts):
+        return f"{parts[0]}/srv/{parts[1]}"
+    return normalize_type(type_name)
+
+
+def stamp(time_s: float) -> Message:
+    """``builtin_interfaces/Time`` for a time in seconds (e.g. ``time.time()``)."""
+    sec = math.floor(time_s)
+    nanosec = min(round((time_s - sec) * 1e9), 999_999_999)
+    return {"sec": int(sec), "nanosec": int(nanosec)}
+
+
+def header(time_s: float, frame_id: str) -> Message:
+    """``std_msgs/Header``."""
+    return {"stamp": stamp(time_s), "frame_id": frame_id}
+
+
+def vector3(x: float = 0.0, y: float = 0.0, z: float = 0.0) -> Message:
+    """``geometry_msgs/Vector3`` (also the shape of ``Point``)."""
+    return {"x": x, "y": y, "z": z}
+
+
+def yaw_quaternion(theta: float) -> Message:
+    """``geometry_msgs/Quaternion`` of a yaw ``theta`` (course text: w = cos, z = sin of θ/2)."""
+    return {"x": 0.0, "y": 0.0, "z": math.sin(theta / 2.0), "w": math.cos(theta / 2.0)}
+
+
+def diagonal_covariance(diagonal: Sequence[float]) -> list[float]:
+    """A row-major 6 x 6 covariance with ``diagonal`` on its diagonal."""
+    matrix = [0.0] * 36
+    for index, value in enumerate(diagonal):
+        matrix[index * 7] = value
+    return matrix
+
+
+def odometry_msg(odom: Odometry, time_s: float, frame_id: str,
+                 pose_variance: tuple[float, float, float] | None = None,
+                 twist_variance: tuple[float, float] | None = None) -> Message:
+    """``nav_msgs/Odometry`` of a pose in ``frame_id`` with body-frame speeds in base_link.
+
+    Args:
+        odom: pose (m, rad) and speeds (m/s, rad/s).
+        time_s: stamp (s).
+        frame_id: ``odom`` for odometry, ``map`` for ground truth.
+        pose_variance: variances of x, y, yaw; ``None`` gives zeros (exact ground truth).
+        twist_variance: variances of v and omega; ``None`` gives zeros.
+    """
+    px, py, pyaw = pose_variance or (0.0, 0.0, 0.0)
+    tv, tw = twist_variance or (0.0, 0.0)
+    unused = UNUSED_COVARIANCE if pose_variance else 0.0
+    return {
+        "header": header(time_s, frame_id),
+        "child_frame_id": BASE_FRAME,
+        "pose": {
+            "pose": {"position": vector3(odom.x, odom.y),
+                     "orientation": yaw_quaternion(odom.theta)},
+            "covariance": diagonal_covariance((px, py, unused, unused, unused, pyaw)),
+        },
+        "twist": {
+            "twist": {"linear": vector3(odom.v), "angular": vector3(z=odom.omega)},
+            "covariance": diagonal_covariance((tv, tv if twist_variance else 0.0, unused,
+                                               unused, unused, tw)),
+        },
+    }
+
+
+def laser_scan_msg(scan: LaserScan, time_s: float, frame_id: str = LASER_FRAME) -> Message:
+    """``sensor_msgs/LaserScan``; ``ranges`` keep their floats (inf included)."""
+    return {
+        "header": header(time_s, frame_id),
+        "angle_min": scan.angle_min,
+        "angle_max": scan.angle_max,
+        "angle_increment": scan.angle_increment,
+        "time_increment": scan.time_increment,
+        "scan_time": scan.scan_time,
+        "range_min": scan.range_min,
+        "range_max": scan.range_max,
+        "ranges": Float32Sequence(scan.ranges),
+        "intensities": Float32Sequence(),
+    }
+
+
+def transform_stamped_msg(time_s: float, parent: str, child: str, x: float, y: float,
+                          theta: float) -> Message:
+    """``geometry_msgs/TransformStamped`` of a planar pose of ``child`` in ``parent``."""
+    return {
+        "header": header(time_s, parent),
+        "child_frame_id": child,
+        "transform": {"translation": vector3(x, y), "rotation": yaw_quaternion(theta)},
+    }
+
+
+def tf_msg(transforms: Sequence[Message]) -> Message:
+    """``tf2_msgs/TFMessage``."""
+    return {"transforms": list(transforms)}
+
+
+MARKER_LINE_LIST = 5
+MARKER_CYLINDER = 3
+MARKER_ADD = 0
+
+
+def _marker(time_s: float, marker_id: int, marker_type: int, pose: Message, scale: Message,
+            color: Message, points: list[Message]) -> Message:
+    return {
+        "header": header(time_s, MAP_FRAME), "ns": "world", "id": marker_id,
+        "type": marker_type, "action": MARKER_ADD,
+        "pose": pose, "scale": scale, "color": color,
+        "lifetime": {"sec": 0, "nanosec": 0}, "frame_locked": False,
+        "points": points, "colors": [], "texture_resource": "",
+        "texture": {"header": header(0.0, ""), "format": "", "data": ""},
+        "uv_coordinates": [], "text": "", "mesh_resource": "",
+        "mesh_file": {"filename": "", "data": ""}, "mesh_use_embedded_materials": False,
+    }
+
+
+WALL_COLOR = {"r": 0.2, "g": 0.2, "b": 0.25, "a": 1.0}
+WALL_LINE_WIDTH_M = 0.02
+
+
+def world_markers_msg(world: World, time_s: float) -> Message:
+    """``visualization_msgs/MarkerArray``: the walls as one LINE_LIST, each disc a CYLINDER."""
+    identity = {"position": vector3(), "orientation": yaw_quaternion(0.0)}
+    points = []
+    for wall in world.walls:
+        points += [vector3(wall.x1, wall.y1), vector3(wall.x2, wall.y2)]
+    markers = [_marker(time_s, 0, MARKER_LINE_LIST, identity, vector3(WALL_LINE_WIDTH_M),
+                       WALL_COLOR, points)]
+    for index, disc in enumerate(world.circles, start=1):
+        pose = {"position": vector3(disc.x, disc.y), "orientation": yaw_quaternion(0.0)}
+        size = 2.0 * disc.radius_m
+        markers.append(_marker(time_s, index, MARKER_CYLINDER, pose, vector3(size, size, 0.3),
+                               WALL_COLOR, []))
+    return {"markers": markers}
+
+
+def twist_from_msg(msg: Any, stamped: bool = False) -> tuple[float, float]:
+    """``(linear.x, angular.z)`` from a ``geometry_msgs/Twist`` (or ``TwistStamped``) dict.
+
+    Missing fields count as 0, as rosbridge fills them.
+
+    Raises:
+        ConfigError: a field is not an object, or a speed is not a finite number.
+    """
+    if stamped:
+        msg = _field(msg, "twist", "TwistStamped")
+    linear = _field(msg, "linear", "Twist")
+    angular = _field(msg, "angular", "Twist")
+    for name, part in (("linear", linear), ("angular", angular)):
+        for axis in ("x", "y", "z"):
+            if axis in part:
+                as_finite_float(f"{name}.{axis}", part[axis])
+    return (as_finite_float("linear.x", linear.get("x", 0.0)),
+            as_finite_float("angular.z", angular.get("z", 0.0)))
+
+
+def _field(msg: Any, name: str, type_name: str) -> Mapping[str, Any]:
+    if not isinstance(msg, Mapping):
+        raise ConfigError(f"{type_name}: expected an object, got {type(msg).__name__}")
+    value = msg.get(name, {})
+    if not isinstance(value, Mapping):
+        raise ConfigError(f"{name}: expected an object, got {type(value).__name__} {value!r}")
+    return value

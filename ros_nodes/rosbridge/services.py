@@ -1,0 +1,172 @@
+"""The services the embedded bridge offers, in the request and response shapes of ROS 2.
+
+* ``/virtual_robot/{get,set,list,describe}_parameters`` and ``get_parameter_types``
+  (``rcl_interfaces/srv``), so the admin page and ``ros2 param`` speak one language;
+* ``/reset_simulation`` (``std_srvs/srv/Empty``), as gazebo_ros offers it;
+* the rosapi services roslibjs calls (``getTopics``, ``Param``...), parameter names in ROS 2's
+  ``/node:param`` form and values as JSON strings.
+
+Changing parameters needs admin rights (the token in the WebSocket URL); reading does not.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from typing import Any
+
+from physics import ConfigError
+from ros_nodes.parameters import (
+    PARAMETER_NOT_SET,
+    RobotParameters,
+    parameter_value_msg,
+    value_from_parameter_value,
+)
+from ros_nodes.rosbridge.bridge import Bridge, ServiceError, Session
+from ros_nodes.virtual_robot_core import VirtualRobot
+
+NODE_NAME = "/virtual_robot"
+"""The robot node's name, as on the real robot and in the Docker stack."""
+
+OTHER_NODES = ("/rosbridge_websocket", "/rosapi")
+"""Nodes a real rosbridge deployment shows next to the robot."""
+
+ADMIN_HINT = "connect with the admin token: ws://HOST:9090/?token=TOKEN"
+
+
+def require_admin(session: Session, action: str) -> None:
+    """Raise unless ``session`` presented the admin token; the one access check."""
+    if not session.is_admin:
+        raise ServiceError(f"{action} needs admin rights; {ADMIN_HINT}")
+
+
+def _names(args: Mapping[str, Any], field: str = "names") -> list[str]:
+    names = args.get(field, [])
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise ServiceError(f"{field}: expected a list of parameter names, got {names!r}")
+    return names
+
+
+def add_robot_services(bridge: Bridge, robot: VirtualRobot) -> None:
+    """Register every embedded service on ``bridge`` for ``robot``."""
+    params = robot.parameters
+    prefix = NODE_NAME
+
+    def get_parameters(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        values = []
+        for name in _names(args):
+            value = params.get(name) if name in params.names() else None
+            values.append(parameter_value_msg(value))
+        return {"values": values}
+
+    def set_parameters(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        require_admin(session, "set_parameters")
+        entries = args.get("parameters", [])
+        if not isinstance(entries, list):
+            raise ServiceError(f"parameters: expected a list, got {entries!r}")
+        results = []
+        for index, entry in enumerate(entries):
+            try:
+                if not isinstance(entry, Mapping) or not isinstance(entry.get("name"), str):
+                    raise ConfigError(f"parameters[{index}]: expected {{name, value}}")
+                params.set(entry["name"], value_from_parameter_value(entry.get("value")))
+                results.append({"successful": True, "reason": ""})
+            except ConfigError as error:
+                results.append({"successful": False, "reason": str(error)})
+        return {"results": results}
+
+    def list_parameters(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        prefixes = _names(args, "prefixes")
+        names = [n for n in params.names()
+                 if not prefixes or any(n.startswith(p) for p in prefixes)]
+        return {"result": {"names": names, "prefixes": []}}
+
+    def describe_parameters(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        descriptors = []
+        for name in _names(args):
+            known = name in params.names()
+            spec = RobotParameters.spec(name) if known else None
+            descriptors.append({
+                "name": name, "type": spec.type_code if spec else PARAMETER_NOT_SET,
+                "description": spec.description if spec else "", "additional_constraints": "",
+                "read_only": False, "dynamic_typing": False,
+                "floating_point_range": [], "integer_range": []})
+        return {"descriptors": descriptors}
+
+    def get_parameter_types(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        return {"types": [RobotParameters.spec(n).type_code if n in params.names()
+                          else PARAMETER_NOT_SET for n in _names(args)]}
+
+    def reset(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        robot.reset()
+        return {}
+
+    for name, type_name, handler in (
+            ("get_parameters", "rcl_interfaces/srv/GetParameters", get_parameters),
+            ("set_parameters", "rcl_interfaces/srv/SetParameters", set_parameters),
+            ("list_parameters", "rcl_interfaces/srv/ListParameters", list_parameters),
+            ("describe_parameters", "rcl_interfaces/srv/DescribeParameters",
+             describe_parameters),
+            ("get_parameter_types", "rcl_interfaces/srv/GetParameterTypes",
+             get_parameter_types)):
+        bridge.add_service(f"{prefix}/{name}", type_name, handler)
+    bridge.add_service("/reset_simulation", "std_srvs/srv/Empty", reset)
+    _add_rosapi(bridge, params)
+
+
+def _split_param_name(name: Any) -> str:
+    """``/virtual_robot:mass_kg`` -> ``mass_kg``; ServiceError for other nodes' names."""
+    if not isinstance(name, str) or ":" not in name:
+        raise ServiceError(f"name: expected '{NODE_NAME}:PARAM', got {name!r}")
+    node, param = name.split(":", 1)
+    if node != NODE_NAME:
+        raise ServiceError(f"no node {node} here (parameters live on {NODE_NAME})")
+    return param
+
+
+def _add_rosapi(bridge: Bridge, params: RobotParameters) -> None:
+    def topics(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        known = sorted(bridge.topics().items())
+        return {"topics": [name for name, _ in known], "types": [t for _, t in known]}
+
+    def topic_type(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        return {"type": bridge.topics().get(str(args.get("topic", "")), "")}
+
+    def services(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        return {"services": sorted(bridge.services())}
+
+    def service_type(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        return {"type": bridge.services().get(str(args.get("service", "")), "")}
+
+    def nodes(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        return {"nodes": [NODE_NAME, *OTHER_NODES]}
+
+    def get_param_names(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        return {"names": [f"{NODE_NAME}:{name}" for name in params.names()]}
+
+    def get_param(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        try:
+            param = _split_param_name(args.get("name"))
+        except ServiceError:
+            return {"value": str(args.get("default_value", ""))}
+        if param not in params.names():
+            return {"value": str(args.get("default_value", ""))}
+        return {"value": json.dumps(params.get(param))}
+
+    def set_param(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        require_admin(session, "set_param")
+        param = _split_param_name(args.get("name"))
+        try:
+            value = json.loads(str(args.get("value")))
+        except ValueError:
+            raise ServiceError(f"value: expected a JSON string, got {args.get('value')!r}") \
+                from None
+        params.set(param, value)
+        return {}
+
+    for name, handler in (("topics", topics), ("topic_type", topic_type),
+                          ("services", services), ("service_type", service_type),
+                          ("nodes", nodes), ("get_param_names", get_param_names),
+                          ("get_param", get_param), ("set_param", set_param)):
+        type_name = "rosapi_msgs/srv/" + "".join(p.title() for p in name.split("_"))
+        bridge.add_service(f"/rosapi/{name}", type_name, handler)

@@ -1,0 +1,64 @@
+"""The robot's ROS interface: topic names, types, rates and frames, kept in one place.
+
+These match the real robot (course text 2.5.3 and 2.5.6): sim-to-real parity is the point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from physics import TICK_PERIOD_S
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """One topic of the virtual robot.
+
+    Attributes:
+        name: the topic name.
+        type: the ROS 2 type, ``pkg/msg/Type``.
+        direction: ``"in"`` (the robot subscribes) or ``"out"`` (the robot publishes).
+        every_ticks: published every this many 50 ms ticks; 0 for latched topics, which are
+            sent once to every new subscriber (transient local).
+        qos: ``"reliable"``, ``"sensor_data"`` (best effort, like lidar drivers) or
+            ``"transient_local"``.
+        description: what it carries.
+    """
+
+    name: str
+    type: str
+    direction: str
+    every_ticks: int
+    qos: str
+    description: str
+
+    @property
+    def rate_hz(self) -> float:
+        """Publishing rate (Hz); 0 for latched and input topics."""
+        return 1.0 / (self.every_ticks * TICK_PERIOD_S) if self.every_ticks else 0.0
+
+    @property
+    def latched(self) -> bool:
+        """True for topics sent once to every subscriber."""
+        return self.direction == "out" and self.every_ticks == 0
+
+
+CMD_VEL = TopicSpec("/cmd_vel", "geometry_msgs/msg/Twist", "in", 0, "reliable",
+                    "velocity command: linear.x (m/s), angular.z (rad/s); the robot keeps the last")
+ODOM = TopicSpec("/odom", "nav_msgs/msg/Odometry", "out", 1, "reliable",
+                 "wheel odometry, frame odom, child base_link")
+SCAN = TopicSpec("/scan", "sensor_msgs/msg/LaserScan", "out", 2, "sensor_data",
+                 "360-beam LiDAR, frame laser")
+TF = TopicSpec("/tf", "tf2_msgs/msg/TFMessage", "out", 1, "reliable", "odom -> base_link")
+TF_STATIC = TopicSpec("/tf_static", "tf2_msgs/msg/TFMessage", "out", 0, "transient_local",
+                      "base_link -> laser")
+GROUND_TRUTH = TopicSpec("/ground_truth", "nav_msgs/msg/Odometry", "out", 1, "reliable",
+                         "true pose, frame map (simulation only)")
+WORLD = TopicSpec("/world", "visualization_msgs/msg/MarkerArray", "out", 0, "transient_local",
+                  "the walls, frame map (simulation only)")
+
+ROBOT_TOPICS = (CMD_VEL, ODOM, SCAN, TF, TF_STATIC, GROUND_TRUTH, WORLD)
+"""Every topic of the virtual robot, in the README's order."""
+
+PUBLISHED_TOPICS = tuple(spec for spec in ROBOT_TOPICS if spec.direction == "out")
+"""Topics only the simulator may publish."""

@@ -1,0 +1,87 @@
+"""The virtual robot without a transport: /cmd_vel in, ROS-shaped messages out, per tick.
+
+The embedded rosbridge server and the rclpy node both wrap this class, so what the robot
+publishes, at which tick and with which stamp, is decided in one place.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from physics import Simulation
+from ros_nodes.messages import (
+    BASE_FRAME,
+    LASER_FRAME,
+    MAP_FRAME,
+    ODOM_FRAME,
+    ODOM_POSE_VARIANCE,
+    ODOM_TWIST_VARIANCE,
+    Message,
+    laser_scan_msg,
+    odometry_msg,
+    tf_msg,
+    transform_stamped_msg,
+    twist_from_msg,
+    world_markers_msg,
+)
+from ros_nodes.parameters import RobotParameters
+from ros_nodes.topics import GROUND_TRUTH, ODOM, SCAN, TF, TF_STATIC, WORLD, TopicSpec
+
+Publication = tuple[TopicSpec, Message]
+
+
+class VirtualRobot:
+    """One simulated robot and the messages it publishes.
+
+    Args:
+        sim: the simulation to drive.
+        clock: wall clock for stamps (s since the epoch), as a real robot stamps its messages.
+    """
+
+    def __init__(self, sim: Simulation, clock: Callable[[], float] = time.time) -> None:
+        self.sim = sim
+        self.parameters = RobotParameters(sim)
+        self._clock = clock
+
+    def on_cmd_vel(self, msg: Any, stamped: bool = False) -> None:
+        """Apply a ``geometry_msgs/Twist`` (or ``TwistStamped``) dict as the new command.
+
+        Raises:
+            ConfigError: malformed or non-finite; the command in force is kept.
+        """
+        linear, angular = twist_from_msg(msg, stamped=stamped)
+        self.sim.command(linear, angular)
+
+    def step(self) -> list[Publication]:
+        """Advance one tick and return the messages due at it (/scan on every second tick)."""
+        self.sim.step()
+        now = self._clock()
+        state = self.sim.state()
+        noise = self.sim.noise
+        pose_variance = (ODOM_POSE_VARIANCE,) * 3
+        twist_variance = (max(noise.odom_linear_sigma_mps**2, ODOM_TWIST_VARIANCE),
+                          max(noise.odom_angular_sigma_rps**2, ODOM_TWIST_VARIANCE))
+        odom = state.odometry
+        out: list[Publication] = [
+            (ODOM, odometry_msg(odom, now, ODOM_FRAME, pose_variance, twist_variance)),
+            (TF, tf_msg([transform_stamped_msg(now, ODOM_FRAME, BASE_FRAME, odom.x, odom.y,
+                                               odom.theta)])),
+            (GROUND_TRUTH, odometry_msg(state.ground_truth, now, MAP_FRAME)),
+        ]
+        if state.tick % SCAN.every_ticks == 0:
+            out.append((SCAN, laser_scan_msg(self.sim.scan(), now)))
+        return out
+
+    def latched(self) -> list[Publication]:
+        """The transient-local messages: /tf_static (base_link -> laser) and /world."""
+        now = self._clock()
+        lidar = self.sim.lidar.params
+        laser = transform_stamped_msg(now, BASE_FRAME, LASER_FRAME, lidar.mount_x_m,
+                                      lidar.mount_y_m, lidar.mount_yaw_rad)
+        return [(TF_STATIC, tf_msg([laser])), (WORLD, world_markers_msg(self.sim.world, now))]
+
+    def reset(self) -> None:
+        """Back to spawn with odometry zeroed (``/reset_simulation``)."""
+        self.sim.reset()

@@ -1,0 +1,97 @@
+"""Start a real ``websim serve`` process on free ports and wait until it answers /healthz."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+ADMIN_TOKEN = "test-admin-token"
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def wait_for(condition: Callable[[], Any], timeout_s: float = 10.0, what: str = "condition",
+             interval_s: float = 0.02) -> Any:
+    """Poll ``condition`` until it returns something truthy; fail after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        result = condition()
+        if result:
+            return result
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(interval_s)
+
+
+@dataclass
+class ServerProcess:
+    """A running ``websim serve``; ``stop()`` sends SIGTERM and waits."""
+
+    ws_port: int
+    http_port: int
+    process: subprocess.Popen[str]
+    output: list[str] = field(default_factory=list)
+
+    @property
+    def ws_url(self) -> str:
+        return f"ws://127.0.0.1:{self.ws_port}/"
+
+    @property
+    def admin_ws_url(self) -> str:
+        return f"ws://127.0.0.1:{self.ws_port}/?token={ADMIN_TOKEN}"
+
+    @property
+    def http_url(self) -> str:
+        return f"http://127.0.0.1:{self.http_port}"
+
+    def health(self) -> dict[str, Any]:
+        with urllib.request.urlopen(f"{self.http_url}/healthz", timeout=2) as response:
+            return dict(json.load(response))
+
+    def stop(self, timeout_s: float = 10.0) -> int:
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+        try:
+            out, _ = self.process.communicate(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            out, _ = self.process.communicate()
+        self.output.append(out or "")
+        return self.process.returncode
+
+
+def start_server(extra_args: Sequence[str] = (), ws_port: int | None = None,
+                 http_port: int | None = None) -> ServerProcess:
+    """Launch ``websim serve`` (as ``python -m websim.cli``) and wait until it is healthy."""
+    ws_port = ws_port or free_port()
+    http_port = http_port or free_port()
+    command = [sys.executable, "-m", "websim.cli", "serve", "--ws-port", str(ws_port),
+               "--http-port", str(http_port), "--admin-token", ADMIN_TOKEN, *extra_args]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                               text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    server = ServerProcess(ws_port, http_port, process)
+
+    def healthy() -> bool:
+        if process.poll() is not None:
+            out, _ = process.communicate()
+            raise AssertionError(f"websim serve exited with {process.returncode}:\n{out}")
+        try:
+            return server.health()["status"] == "ok"
+        except OSError:
+            return False
+
+    wait_for(healthy, timeout_s=20.0, what="websim serve to become healthy")
+    return server
