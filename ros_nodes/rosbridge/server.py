@@ -50,11 +50,13 @@ class TickStats:
 
     Attributes:
         ticks: ticks run since start.
+        started_s: when the schedule started (event-loop monotonic s), None before.
         lateness_s: how late each recent tick started after its deadline (s).
         resyncs: times the schedule was restarted after falling far behind.
     """
 
     ticks: int = 0
+    started_s: float | None = None
     lateness_s: deque[float] | None = None
     resyncs: int = 0
 
@@ -92,10 +94,13 @@ class SimServer:
 
     def health(self) -> dict[str, Any]:
         """A small status report: uptime, ticks, jitter, clients, simulated time."""
+        started = self.stats.started_s
+        due = 0 if started is None else int((time.monotonic() - started) / self._period_s)
         return {
             "status": "ok",
             "uptime_s": round(time.monotonic() - self.started_monotonic_s, 3),
             "ticks": self.stats.ticks,
+            "ticks_due": due,
             "tick_jitter_p99_ms": round(self.stats.jitter_p99_ms(), 3),
             "tick_resyncs": self.stats.resyncs,
             "clients": len(self.bridge.sessions),
@@ -114,6 +119,7 @@ class SimServer:
         """Tick forever at ``period_s``, deadlines fixed to the monotonic clock."""
         loop = asyncio.get_running_loop()
         deadline = loop.time()
+        self.stats.started_s = deadline
         while True:
             deadline += self._period_s
             delay = deadline - loop.time()
@@ -123,6 +129,7 @@ class SimServer:
             if now - deadline > RESYNC_AFTER_S:
                 log.warning("tick loop %.1f s behind; restarting its schedule", now - deadline)
                 self.stats.resyncs += 1
+                self.stats.started_s = now - self.stats.ticks * self._period_s
                 deadline = now
             assert self.stats.lateness_s is not None
             self.stats.lateness_s.append(max(0.0, now - deadline))
