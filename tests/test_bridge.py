@@ -6,6 +6,7 @@ A hand-advanced monotonic clock stands in for time where throttling and timeouts
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from typing import Any
@@ -451,3 +452,19 @@ def test_reply_overflow_marks_the_outbox(rig: Rig) -> None:
         rig.send(session, {"op": "call_service", "service": "/rosapi/nodes", "id": str(index)})
     assert session.outbox.overflowed
     assert len(session.outbox) == 5
+
+
+def test_throttle_never_sends_closer_than_the_rate_less_jitter(rig: Rig) -> None:
+    client = rig.client()
+    rig.send(client, {"op": "subscribe", "topic": "/odom", "throttle_rate": 200,
+                      "queue_length": 100})
+    sent_at = []
+    lateness = [0.0, 0.004, 0.001, 0.0045, 0.002]  # ticks start late, never early
+    for tick in range(60):
+        rig.clock.now_s = 100.0 + 0.05 * tick + lateness[tick % len(lateness)]
+        rig.tick()
+        if rig.drain(client):
+            sent_at.append(rig.clock.now_s)
+    gaps = [b - a for a, b in itertools.pairwise(sent_at)]
+    assert min(gaps) >= 0.195
+    assert len(sent_at) == 15, "5 Hz over 3 s despite the jitter"

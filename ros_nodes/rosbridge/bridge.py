@@ -32,9 +32,10 @@ log = logging.getLogger("websim.bridge")
 SERVICE_TIMEOUT_S = 5.0
 """How long a call to a client-provided service may wait for its answer."""
 
-THROTTLE_SLACK_S = 0.001
-"""A throttled message may go this much before its due time, so a 200 ms throttle on a 20 Hz
-topic gives 5 Hz even when a tick lands a hair early."""
+THROTTLE_JITTER_S = 0.005
+"""Tick jitter a throttle tolerates: ``throttle_rate`` is the least time between two messages
+(rosbridge's definition), less this, so a 200 ms throttle on the 20 Hz /odom gives 5 Hz even
+when a tick starts a few milliseconds early relative to the last one sent."""
 
 
 class BridgeError(Exception):
@@ -53,14 +54,13 @@ class Subscription:
         throttle_ms: per id, the least time between two messages (ms).
         queue_length: per id, how many of the newest messages may wait.
         compression: ``"none"`` or ``"cbor"``.
-        next_due_s: when the next message may be queued (monotonic s); with a throttle it
-            advances by one throttle period per message, so the average rate is kept.
+        last_sent_s: when the last message was queued (monotonic s).
     """
 
     throttle_ms: dict[Any, float] = field(default_factory=dict)
     queue_length: dict[Any, int] = field(default_factory=dict)
     compression: str = "none"
-    next_due_s: float = -math.inf
+    last_sent_s: float = -math.inf
 
     def effective(self) -> tuple[float, int]:
         """(throttle_ms, queue_length) in force: the least throttle, the longest queue."""
@@ -281,12 +281,10 @@ class Bridge:
         for session in self._subscribers.get(topic, ()):
             subscription = session.subscriptions[topic]
             throttle_ms, queue_length = subscription.effective()
-            if throttle_ms > 0:
-                if now < subscription.next_due_s - THROTTLE_SLACK_S:
-                    continue
-                period_s = throttle_ms / 1000.0
-                behind = now - subscription.next_due_s >= period_s
-                subscription.next_due_s = (now if behind else subscription.next_due_s) + period_s
+            gap_s = now - subscription.last_sent_s
+            if throttle_ms > 0 and gap_s < throttle_ms / 1000.0 - THROTTLE_JITTER_S:
+                continue
+            subscription.last_sent_s = now
             session.outbox.put_topic(topic, encoded.frame(subscription.compression),
                                      queue_length)
 
