@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import json
 import math
+import shutil
+import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from physics import ConfigError, RobotParams, load_world
@@ -133,3 +137,28 @@ def test_heading_pid_object_matches_pid_step() -> None:
         step = pid_step(pid.gains, state, math.pi / 2, heading)
         state = step.state
         assert pid.update(heading) == step.output
+
+
+@pytest.mark.skipif(shutil.which("node") is None, reason="node not installed")
+def test_browser_pid_equals_python_pid() -> None:
+    rng = np.random.default_rng(4)
+    headings = np.cumsum(rng.normal(0.0, 0.4, size=200)).tolist()
+    headings += [math.pi, -math.pi, 3.0, -3.0, 0.0]
+    gains = PidGains(kp=3.0, ki=1.5, kd=0.4, output_limit=2.0)
+    setpoint = math.radians(170)
+    trace = json.dumps({"gains": {"kp": gains.kp, "ki": gains.ki, "kd": gains.kd,
+                                  "outputLimit": gains.output_limit},
+                        "setpoint": setpoint, "dt": 0.1, "headings": headings})
+    result = subprocess.run(["node", str(Path(__file__).parent / "web" / "pid_trace.mjs"),
+                             trace], capture_output=True, text=True, timeout=30, check=True)
+    browser = json.loads(result.stdout)
+    state = PidState()
+    saturated = 0
+    for heading, js in zip(headings, browser, strict=True):
+        step = pid_step(gains, state, setpoint, heading)
+        state = step.state
+        saturated += abs(step.output) == gains.output_limit
+        assert js["output"] == pytest.approx(step.output, abs=1e-12)
+        assert js["error"] == pytest.approx(step.error, abs=1e-12)
+        assert js["integral"] == pytest.approx(state.integral, abs=1e-12)
+    assert 0 < saturated < len(headings), "the trace exercises anti-windup and the linear range"

@@ -1,0 +1,602 @@
+"""The web interface in a real headless Chromium against a real ``websim serve``.
+
+The browser is Debian's ``/usr/bin/chromium`` driven by Python Playwright (never
+``playwright install``: no browser downloads). What the robot did is checked on the bridge with
+a raw rosbridge WebSocket client (``/odom``, ``/cmd_vel``, services), not in the page's DOM. The
+pure frontend modules (PID, message conversions, connection, teleop) are unit-tested under
+Node's own test runner (``tests/web/*.test.mjs``).
+
+Screenshots go to ``test-artifacts/`` (gitignored). The PID test also writes the README's
+``docs/screenshot.png`` when it is missing or ``UPDATE_SCREENSHOT=1`` is set, so an ordinary
+run leaves the committed picture alone.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import itertools
+import json
+import math
+import os
+import shutil
+import subprocess
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlsplit
+
+import pytest
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect
+
+from server_process import ADMIN_TOKEN, ServerProcess, free_port, start_server, wait_for
+
+ROOT = Path(__file__).resolve().parent.parent
+WEB_DIR = ROOT / "web-interface"
+NODE_TESTS = sorted((Path(__file__).parent / "web").glob("*.test.mjs"))
+ARTIFACTS = ROOT / "test-artifacts"
+DOCS_SCREENSHOT = ROOT / "docs" / "screenshot.png"
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--no-first-run",
+                 "--disable-quic"]
+LOCAL_HOSTS = {"127.0.0.1", "localhost"}
+
+NODE = shutil.which("node")
+LIBRARIES = [WEB_DIR / "node_modules" / path for path in (
+    "roslib/build/roslib.min.js", "uplot/dist/uPlot.esm.js", "nipplejs/dist/index.js")]
+
+SCAN_RGB = (225, 29, 72)
+"""view.js COLORS.scan (#e11d48)."""
+WALL_RGB = (30, 41, 59)
+"""view.js COLORS.wall (#1e293b)."""
+SPEED_MPS = 0.3
+"""The page's default linear speed slider value."""
+DEG = math.pi / 180
+
+
+def _browser_skip_reason() -> str | None:
+    if not Path(CHROMIUM).exists():
+        return "chromium not installed"
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        return "playwright not installed (pip install -e '.[test]')"
+    missing = [str(p.relative_to(ROOT)) for p in LIBRARIES if not p.exists()]
+    if missing:
+        return f"{', '.join(missing)} missing: run npm ci in web-interface/"
+    return None
+
+
+BROWSER_SKIP = _browser_skip_reason()
+needs_browser = pytest.mark.skipif(BROWSER_SKIP is not None, reason=BROWSER_SKIP or "")
+
+
+# --- A raw rosbridge client: the robot's side of every check -------------------------------
+
+class Bridge:
+    """A rosbridge v2 client on one WebSocket, read by a thread: records topics, answers calls."""
+
+    def __init__(self, url: str) -> None:
+        self._stack = contextlib.ExitStack()
+        self._ws = self._stack.enter_context(connect(url, max_size=None))
+        self._lock = threading.Lock()
+        self._messages: dict[str, list[dict[str, Any]]] = collections.defaultdict(list)
+        self._responses: dict[str, dict[str, Any]] = {}
+        self._ids = itertools.count()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        try:
+            for frame in self._ws:
+                msg = json.loads(frame)
+                with self._lock:
+                    if msg.get("op") == "publish":
+                        self._messages[msg["topic"]].append(msg["msg"])
+                    elif msg.get("op") == "service_response":
+                        self._responses[msg["id"]] = msg
+        except ConnectionClosed:
+            pass
+
+    def send(self, **msg: Any) -> None:
+        self._ws.send(json.dumps(msg))
+
+    def subscribe(self, topic: str, queue_length: int = 50) -> None:
+        self.send(op="subscribe", topic=topic, queue_length=queue_length)
+
+    def messages(self, topic: str) -> list[dict[str, Any]]:
+        with self._lock:
+            return list(self._messages[topic])
+
+    def call(self, service: str, args: dict[str, Any] | None = None,
+             timeout_s: float = 5.0) -> dict[str, Any]:
+        call_id = f"call:{next(self._ids)}"
+        self.send(op="call_service", id=call_id, service=service, args=args or {})
+
+        def answered() -> dict[str, Any] | None:
+            with self._lock:
+                return self._responses.pop(call_id, None)
+
+        return dict(wait_for(answered, timeout_s=timeout_s, what=f"the answer of {service}"))
+
+    def parameter(self, name: str) -> Any:
+        response = self.call("/virtual_robot/get_parameters", {"names": [name]})
+        value = response["values"]["values"][0]
+        return value["string_value"] if value["type"] == 4 else value["double_value"]
+
+    def close(self) -> None:
+        self._stack.close()
+        self._reader.join(timeout=5)
+
+
+@pytest.fixture(scope="module")
+def bridge(server: ServerProcess) -> Iterator[Bridge]:
+    client = Bridge(server.ws_url)
+    client.subscribe("/odom")
+    client.subscribe("/cmd_vel")
+    yield client
+    client.close()
+
+
+def latest_odom(bridge: Bridge) -> dict[str, Any]:
+    return wait_for(lambda: bridge.messages("/odom")[-1:], what="/odom")[0]
+
+
+def x_of(odom: dict[str, Any]) -> float:
+    return float(odom["pose"]["pose"]["position"]["x"])
+
+
+def yaw_of(odom: dict[str, Any]) -> float:
+    q = odom["pose"]["pose"]["orientation"]
+    return 2.0 * math.atan2(q["z"], q["w"])
+
+
+def speed_of(odom: dict[str, Any]) -> float:
+    return float(odom["twist"]["twist"]["linear"]["x"])
+
+
+def reset_robot(bridge: Bridge) -> None:
+    """Back to the spawn pose, command zeroed, and wait until odometry shows it."""
+    assert bridge.call("/reset_simulation")["result"] is True
+    def at_spawn() -> bool:
+        odom = latest_odom(bridge)
+        return x_of(odom) == 0.0 and yaw_of(odom) == 0.0 and speed_of(odom) == 0.0
+
+    wait_for(at_spawn, what="the reset in /odom")
+
+
+def wait_until_still(bridge: Bridge, timeout_s: float = 5.0) -> dict[str, Any]:
+    """The first /odom at zero speed whose pose the next 0.3 s of odometry does not change."""
+    def still() -> dict[str, Any] | None:
+        odoms = bridge.messages("/odom")
+        last = odoms[-1]
+        recent = odoms[-7:]  # 0.3 s at 20 Hz
+        if len(recent) == 7 and all(speed_of(m) == 0.0 and x_of(m) == x_of(last)
+                                    and yaw_of(m) == yaw_of(last) for m in recent):
+            return last
+        return None
+
+    return dict(wait_for(still, timeout_s=timeout_s, what="the robot to stand still"))
+
+
+def twist_pairs(messages: list[dict[str, Any]]) -> list[tuple[float, float]]:
+    return [(m["linear"]["x"], m["angular"]["z"]) for m in messages]
+
+
+# --- The browser ---------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    """Debian's chromium under Playwright; each launch gets a fresh temporary profile."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        launched = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS,
+                                              headless=True)
+        yield launched
+        launched.close()
+
+
+@dataclass
+class PageLog:
+    """What a page did: every request URL (WebSockets too), console errors, uncaught errors."""
+
+    requests: list[str] = field(default_factory=list)
+    console_errors: list[str] = field(default_factory=list)
+    page_errors: list[str] = field(default_factory=list)
+
+    def foreign_requests(self) -> list[str]:
+        return [url for url in self.requests
+                if urlsplit(url).scheme not in ("data", "blob", "about")
+                and urlsplit(url).hostname not in LOCAL_HOSTS]
+
+
+def open_page(context: Any, url: str) -> tuple[Any, PageLog]:
+    page = context.new_page()
+    log = PageLog()
+    page.on("request", lambda request: log.requests.append(request.url))
+    page.on("websocket", lambda websocket: log.requests.append(websocket.url))
+    page.on("console", lambda msg: log.console_errors.append(msg.text)
+            if msg.type == "error" else None)
+    page.on("pageerror", lambda error: log.page_errors.append(str(error)))
+    page.goto(url)
+    return page, log
+
+
+def page_url(server: ServerProcess, path: str = "/", **query: str) -> str:
+    params = "&".join(f"{key}={value}" for key, value in {"ws": server.ws_url, **query}.items())
+    return f"{server.http_url}{path}?{params}"
+
+
+def wait_connected(page: Any, timeout_s: float = 15.0) -> None:
+    page.wait_for_selector('#conn-status[data-status="connected"]', timeout=timeout_s * 1000)
+
+
+def wait_for_odom_in_page(page: Any) -> None:
+    """The page has odometry: its x readout shows a number."""
+    page.wait_for_function(
+        "/^-?\\d+\\.\\d{3}$/.test(document.querySelector('[data-readout=x]').textContent)",
+        timeout=10000)
+
+
+def screenshot(page: Any, name: str, full_page: bool = True) -> Path:
+    ARTIFACTS.mkdir(exist_ok=True)
+    path = ARTIFACTS / name
+    page.screenshot(path=str(path), full_page=full_page)
+    return path
+
+
+# --- Tests ---------------------------------------------------------------------------------
+
+@pytest.mark.skipif(NODE is None, reason="node not installed")
+def test_frontend_modules_pass_their_node_unit_tests() -> None:
+    assert NODE is not None and NODE_TESTS
+    result = subprocess.run([NODE, "--test", *map(str, NODE_TESTS)], capture_output=True,
+                            text=True, timeout=120, check=False)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "# fail 0" in result.stdout
+
+
+@needs_browser
+def test_page_loads_locally_without_errors_and_connects(server: ServerProcess,
+                                                        bridge: Bridge, browser: Any) -> None:
+    admin = Bridge(server.admin_ws_url)
+    limit = admin.call("/virtual_robot/set_parameters", {"parameters": [
+        {"name": "max_linear_mps", "value": {"type": 3, "double_value": 0.45}}]})
+    assert limit["values"]["results"][0]["successful"] is True
+    context = browser.new_context(viewport={"width": 1280, "height": 860},
+                                  device_scale_factor=2)
+    try:
+        page, log = open_page(context, page_url(server))
+        wait_connected(page)
+        wait_for_odom_in_page(page)
+        page.wait_for_function(  # the speed slider is bounded by the robot's own limit
+            "document.querySelector('#speed-linear').max === '0.45'", timeout=10000)
+        assert page.input_value("#ws-url") == server.ws_url  # ?ws= honoured
+        assert page.is_hidden("#fatal")
+        assert page.is_hidden("#view-message")
+        canvas = page.evaluate(
+            "(() => { const c = document.querySelector('#view'), r = c.getBoundingClientRect();"
+            " return [c.width, r.width, c.height, r.height]; })()")
+        # HiDPI: the backing store has devicePixelRatio (2) pixels per CSS pixel.
+        assert canvas[0] == round(2 * canvas[1]) and canvas[2] == round(2 * canvas[3])
+        screenshot(page, "main-connected.png")
+        assert log.console_errors == [] and log.page_errors == []
+        assert any(url.endswith("/node_modules/uplot/dist/uPlot.esm.js") for url in log.requests)
+        assert log.foreign_requests() == []
+    finally:
+        context.close()
+        admin.call("/virtual_robot/set_parameters", {"parameters": [
+            {"name": "max_linear_mps", "value": {"type": 3, "double_value": 0.5}}]})
+        admin.close()
+
+
+@needs_browser
+def test_holding_arrow_up_drives_and_releasing_stops(server: ServerProcess, bridge: Bridge,
+                                                     browser: Any) -> None:
+    reset_robot(bridge)
+    context = browser.new_context(viewport={"width": 1280, "height": 860})
+    try:
+        page, log = open_page(context, page_url(server))
+        wait_connected(page)
+        wait_for_odom_in_page(page)
+        commands_before = len(bridge.messages("/cmd_vel"))
+        odoms_before = len(bridge.messages("/odom"))
+        page.keyboard.down("ArrowUp")
+        moving = wait_for(lambda: [m for m in bridge.messages("/odom")[odoms_before:]
+                                   if x_of(m) > 0], what="the robot to move")[0]
+        time.sleep(1.0)  # holding the key is the point of this test
+        page.keyboard.up("ArrowUp")
+        stopped = wait_until_still(bridge)
+        commands = twist_pairs(bridge.messages("/cmd_vel")[commands_before:])
+        screenshot(page, "main-after-drive.png")
+        assert log.console_errors == [] and log.page_errors == []
+    finally:
+        context.close()
+    assert speed_of(moving) == pytest.approx(SPEED_MPS)
+    # About 1 s at 0.3 m/s: the key was held 1 s after the first motion, plus latency.
+    assert 0.25 < x_of(stopped) < 0.5
+    assert abs(yaw_of(stopped)) < 1e-9
+    assert commands[-1] == (0.0, 0.0)  # a zero Twist on release
+    assert sum(1 for c in commands if c == (SPEED_MPS, 0.0)) >= 5  # 10 Hz while held
+
+
+@needs_browser
+def test_no_driving_from_a_text_field_and_focus_loss_stops(server: ServerProcess,
+                                                          bridge: Bridge,
+                                                          browser: Any) -> None:
+    reset_robot(bridge)
+    context = browser.new_context()
+    try:
+        page, _ = open_page(context, page_url(server))
+        wait_connected(page)
+        wait_for_odom_in_page(page)
+        commands_before = len(bridge.messages("/cmd_vel"))
+        page.focus("#pid-kp")
+        page.keyboard.down("ArrowUp")
+        time.sleep(0.5)
+        page.keyboard.up("ArrowUp")
+        assert bridge.messages("/cmd_vel")[commands_before:] == []
+        page.focus("#follow")  # a button: keys drive again
+        page.keyboard.down("w")
+        wait_for(lambda: speed_of(latest_odom(bridge)) > 0, what="driving with W")
+        page.evaluate("window.dispatchEvent(new Event('blur'))")  # the tab loses focus
+        stopped = wait_until_still(bridge)
+        assert twist_pairs(bridge.messages("/cmd_vel"))[-1] == (0.0, 0.0)
+        page.keyboard.up("w")
+    finally:
+        context.close()
+    assert x_of(stopped) > 0
+
+
+def _pixel_boxes(page: Any) -> dict[str, Any]:
+    """Counts and bounding boxes (device px) of the scan's and the walls' colours."""
+    return dict(page.evaluate(
+        """([scan, wall]) => {
+          const c = document.querySelector('#view');
+          const data = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+          const boxes = {scan: {n: 0, x0: 1e9, y0: 1e9, x1: -1, y1: -1},
+                         wall: {n: 0, x0: 1e9, y0: 1e9, x1: -1, y1: -1}};
+          const near = (i, rgb) => Math.abs(data[i] - rgb[0]) <= 12
+            && Math.abs(data[i + 1] - rgb[1]) <= 12 && Math.abs(data[i + 2] - rgb[2]) <= 12;
+          for (let i = 0; i < data.length; i += 4) {
+            for (const [name, rgb] of [['scan', scan], ['wall', wall]]) {
+              if (!near(i, rgb)) continue;
+              const b = boxes[name], p = i / 4, x = p % c.width, y = Math.floor(p / c.width);
+              b.n += 1; b.x0 = Math.min(b.x0, x); b.x1 = Math.max(b.x1, x);
+              b.y0 = Math.min(b.y0, y); b.y1 = Math.max(b.y1, y);
+            }
+          }
+          return boxes;
+        }""", [list(SCAN_RGB), list(WALL_RGB)]))
+
+
+@needs_browser
+def test_scan_points_are_drawn_on_the_walls(server: ServerProcess, bridge: Bridge,
+                                            browser: Any) -> None:
+    reset_robot(bridge)
+    context = browser.new_context(viewport={"width": 1280, "height": 860})
+    try:
+        page, _ = open_page(context, page_url(server))
+        wait_connected(page)
+        boxes = wait_for(lambda: (b := _pixel_boxes(page))["scan"]["n"] > 300
+                         and b["wall"]["n"] > 300 and b, timeout_s=10,
+                         what="scan and wall pixels on the canvas")
+    finally:
+        context.close()
+    scan, wall = boxes["scan"], boxes["wall"]
+    # The robot is at the centre of the 6 m square; every return lies on a wall, and the
+    # returns reach all four walls (only the corners, beyond 3.5 m, are out of range).
+    tolerance_px = 4
+    assert scan["x0"] >= wall["x0"] - tolerance_px and scan["x1"] <= wall["x1"] + tolerance_px
+    assert scan["y0"] >= wall["y0"] - tolerance_px and scan["y1"] <= wall["y1"] + tolerance_px
+    assert scan["x1"] - scan["x0"] > 0.9 * (wall["x1"] - wall["x0"])
+    assert scan["y1"] - scan["y0"] > 0.9 * (wall["y1"] - wall["y0"])
+
+
+@needs_browser
+def test_dead_bridge_shows_a_message_and_the_default_url(server: ServerProcess,
+                                                         browser: Any) -> None:
+    context = browser.new_context()
+    try:
+        dead = f"ws://127.0.0.1:{free_port()}"
+        page, log = open_page(context, f"{server.http_url}/?ws={dead}")
+        page.wait_for_selector('#conn-status[data-status="error"]', timeout=10000)
+        message = page.wait_for_selector("#view-message:not([hidden])", timeout=5000)
+        assert f"Cannot reach the bridge at {dead}." in message.text_content()
+        assert page.is_hidden("#fatal") and page.is_visible("#view")
+        assert log.page_errors == []
+        screenshot(page, "main-dead-bridge.png", full_page=False)
+        page.goto(f"{server.http_url}/")
+        assert page.input_value("#ws-url") == "ws://127.0.0.1:9090"  # the page's host
+    finally:
+        context.close()
+
+
+@needs_browser
+def test_ws_parameter_and_reconnect_after_a_server_restart(browser: Any) -> None:
+    first = start_server()
+    ws_port, http_port = first.ws_port, first.http_port
+    second: ServerProcess | None = None
+    context = browser.new_context()
+    try:
+        page, _ = open_page(context, page_url(first))
+        wait_connected(page)
+        wait_for_odom_in_page(page)
+        first.stop()
+        page.wait_for_selector('#conn-status:is([data-status="closed"], [data-status="error"])',
+                               timeout=10000)
+        second = start_server(ws_port=ws_port, http_port=http_port)
+        wait_connected(page, timeout_s=20)
+        back_ms = page.evaluate("performance.now()")
+        page.wait_for_function(  # odometry flows again: the subscriptions came back
+            "t => window.websim.state.odomAtMs > t", arg=back_ms, timeout=10000)
+        check = Bridge(second.ws_url)
+        try:
+            check.subscribe("/odom")
+            page.keyboard.down("ArrowUp")  # and the page's publisher works on the new bridge
+            wait_for(lambda: check.messages("/odom")
+                     and x_of(check.messages("/odom")[-1]) > 0.05, what="motion after restart")
+            page.keyboard.up("ArrowUp")
+            wait_until_still(check)
+        finally:
+            check.close()
+    finally:
+        context.close()
+        first.stop()
+        if second is not None:
+            second.stop()
+
+
+@needs_browser
+def test_pid_panel_turns_the_robot_to_90_degrees(server: ServerProcess, bridge: Bridge,
+                                                 browser: Any) -> None:
+    reset_robot(bridge)
+    context = browser.new_context(viewport={"width": 1280, "height": 860})
+    try:
+        page, log = open_page(context, page_url(server))
+        wait_connected(page)
+        wait_for_odom_in_page(page)
+        page.keyboard.down("ArrowUp")  # a short drive first: the screenshot shows a trail
+        wait_for(lambda: x_of(latest_odom(bridge)) > 0.3, what="a short drive")
+        page.keyboard.up("ArrowUp")
+        wait_until_still(bridge)
+        page.fill("#pid-kp", "2")
+        page.fill("#pid-ki", "0")
+        page.fill("#pid-kd", "0")
+        page.fill("#pid-setpoint", "90")
+        page.click("#pid-toggle")
+        settled = wait_for(lambda: abs(yaw_of(latest_odom(bridge)) - 90 * DEG) < 1 * DEG,
+                           timeout_s=15, what="the heading to reach 90°")
+        assert settled
+        time.sleep(1.5)  # stay there: the heading plot shows the settled step response
+        headings = [yaw_of(m) for m in bridge.messages("/odom")[-20:]]
+        linear = [c[0] for c in twist_pairs(bridge.messages("/cmd_vel")[-20:])]
+        page.click("#pid-toggle")
+        wait_until_still(bridge)
+        assert twist_pairs(bridge.messages("/cmd_vel"))[-1] == (0.0, 0.0)
+        screenshot(page, "main-pid.png")
+        if not DOCS_SCREENSHOT.exists() or os.environ.get("UPDATE_SCREENSHOT") == "1":
+            DOCS_SCREENSHOT.parent.mkdir(exist_ok=True)
+            page.screenshot(path=str(DOCS_SCREENSHOT), full_page=True)
+        assert log.console_errors == [] and log.page_errors == []
+    finally:
+        context.close()
+    assert all(abs(h - 90 * DEG) < 2 * DEG for h in headings)
+    assert linear == [0.0] * len(linear)  # the PID only turns
+
+
+@needs_browser
+def test_admin_changes_mass_with_the_token(server: ServerProcess, bridge: Bridge,
+                                           browser: Any) -> None:
+    context = browser.new_context(viewport={"width": 1280, "height": 860})
+    try:
+        page, log = open_page(context, page_url(server, "/admin", token=ADMIN_TOKEN))
+        wait_connected(page)
+        assert "token" not in page.url  # stored, then taken out of the address bar
+        assert page.evaluate("sessionStorage.getItem('websim.adminToken')") == ADMIN_TOKEN
+        page.wait_for_selector("#params-form[data-loaded]")
+        assert page.input_value("#param-mass") == "1.2"
+        assert page.input_value("#param-mode") == "kinematic"
+        page.fill("#param-mass", "2.5")
+        page.click("#params-apply")
+        notice = page.wait_for_selector('#params-notice[data-kind="ok"]', timeout=10000)
+        assert "mass_kg = 2.5" in notice.text_content()
+        assert bridge.parameter("mass_kg") == 2.5
+        page.reload()  # the token is asked once per tab: it is still there
+        wait_connected(page)
+        assert page.is_hidden("#token-form")
+        page.wait_for_selector("#params-form[data-loaded]")
+        assert page.input_value("#param-mass") == "2.5"
+        wait_for_odom_in_page(page)
+        screenshot(page, "admin.png")
+        page.fill("#param-mass", "1.2")
+        page.click("#params-apply")
+        page.wait_for_selector('#params-notice[data-kind="ok"]', timeout=10000)
+        assert log.console_errors == [] and log.page_errors == []
+        assert log.foreign_requests() == []
+    finally:
+        context.close()
+    assert bridge.parameter("mass_kg") == 1.2
+
+
+@needs_browser
+def test_admin_without_the_token_shows_the_refusal(server: ServerProcess, bridge: Bridge,
+                                                   browser: Any) -> None:
+    context = browser.new_context(viewport={"width": 1280, "height": 860})
+    try:
+        page, _ = open_page(context, page_url(server, "/admin"))
+        wait_connected(page)
+        assert page.is_visible("#token-form")
+        page.wait_for_selector("#params-form[data-loaded]")
+        page.fill("#param-mass", "3")
+        page.click("#params-apply")
+        notice = page.wait_for_selector('#params-notice[data-kind="error"]', timeout=10000)
+        assert "set_parameters needs admin rights" in notice.text_content()
+        page.fill("#token-input", "not-the-token")  # a wrong token: refused the same way
+        page.click("#token-form button[type=submit]")
+        wait_connected(page)
+        page.wait_for_selector("#params-form[data-loaded]")
+        page.evaluate("document.querySelector('#params-notice').hidden = true")
+        page.fill("#param-mass", "3")
+        page.click("#params-apply")
+        notice = page.wait_for_selector('#params-notice[data-kind="error"]', timeout=10000)
+        assert "needs admin rights" in notice.text_content()
+        assert page.is_visible('#token-state[data-kind="error"]')  # says the token is wrong
+        assert page.is_visible("#token-form")  # and asks again
+        screenshot(page, "admin-refused.png")
+    finally:
+        context.close()
+    assert bridge.parameter("mass_kg") == 1.2
+
+
+@needs_browser
+def test_phone_shows_the_joystick_and_dragging_it_drives(server: ServerProcess,
+                                                         bridge: Bridge,
+                                                         browser: Any) -> None:
+    reset_robot(bridge)
+    context = browser.new_context(viewport={"width": 390, "height": 844}, has_touch=True,
+                                  is_mobile=True, device_scale_factor=3)
+    try:
+        page, log = open_page(context, page_url(server))
+        wait_connected(page)
+        wait_for_odom_in_page(page)
+        layout = page.evaluate(
+            "({page: document.documentElement.scrollWidth,"
+            " view: document.querySelector('#view').getBoundingClientRect().width})")
+        assert layout["page"] <= 390  # nothing sticks out sideways
+        assert layout["view"] >= 390 - 40  # the view fills the width
+        assert page.is_visible("#joystick")
+        assert page.is_hidden('[data-drive="forward"]')
+        screenshot(page, "phone.png", full_page=False)
+        zone = page.locator("#joystick")
+        zone.scroll_into_view_if_needed()
+        box = zone.bounding_box()
+        x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        touch = context.new_cdp_session(page)
+
+        def finger(kind: str, points: list[dict[str, float]]) -> None:
+            touch.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": points})
+
+        odoms_before = len(bridge.messages("/odom"))
+        finger("touchStart", [{"x": x, "y": y}])
+        for step in range(1, 11):  # drag straight up, to the rim
+            finger("touchMove", [{"x": x, "y": y - 8 * step}])
+        moving = wait_for(lambda: [m for m in bridge.messages("/odom")[odoms_before:]
+                                   if x_of(m) > 0.05], what="the joystick to drive the robot")[0]
+        screenshot(page, "phone-joystick.png", full_page=False)
+        finger("touchEnd", [])
+        stopped = wait_until_still(bridge)
+        assert twist_pairs(bridge.messages("/cmd_vel"))[-1] == (0.0, 0.0)
+        assert log.console_errors == [] and log.page_errors == []
+    finally:
+        context.close()
+    assert speed_of(moving) > 0.1  # forward, at the joystick's deflection
+    assert abs(yaw_of(stopped)) < 0.05  # straight up: hardly any turning
+    assert x_of(stopped) > 0.05

@@ -1,0 +1,67 @@
+// The page's state bookkeeping (web-interface/js/state.js): which pose is shown, the trail,
+// plot history and message rates.
+import assert from 'node:assert/strict';
+import { test } from 'node:test';
+
+import {
+  createState, displayPose, HISTORY_S, onGroundTruth, onOdometry, onWorld, rateHz,
+  TRUTH_STALE_MS,
+} from '../../web-interface/js/state.js';
+
+function odometry(x, y, stampS, frame = 'odom') {
+  return {
+    header: { stamp: { sec: Math.floor(stampS), nanosec: Math.round((stampS % 1) * 1e9) },
+      frame_id: frame },
+    pose: { pose: { position: { x, y, z: 0 }, orientation: { x: 0, y: 0, z: 0, w: 1 } } },
+    twist: { twist: { linear: { x: 0.1 }, angular: { z: 0 } } },
+  };
+}
+
+test('ground truth is shown while it flows, odometry after it stops (a real robot)', () => {
+  const state = createState();
+  assert.equal(displayPose(state, 0).pose, null);
+  onOdometry(state, odometry(1, 0, 100), 0);
+  assert.equal(displayPose(state, 0).frame, 'odom');
+  onGroundTruth(state, odometry(2, 0, 100, 'map'), 10);
+  assert.equal(displayPose(state, 20).frame, 'map');
+  assert.equal(displayPose(state, 20).pose.x, 2);
+  assert.equal(displayPose(state, 10 + TRUTH_STALE_MS + 1).frame, 'odom');
+});
+
+test('the trail skips sub-centimetre steps and breaks at a reset jump', () => {
+  const state = createState();
+  onOdometry(state, odometry(0, 0, 1), 0);
+  onOdometry(state, odometry(0.005, 0, 1.05), 50);
+  onOdometry(state, odometry(0.02, 0, 1.1), 100);
+  onOdometry(state, odometry(2, 0, 1.15), 150);
+  const points = state.trail.points;
+  assert.deepEqual(points.map((p) => p.x), [0, 0.02, 2]);
+  assert.deepEqual(points.map((p) => p.gap), [true, false, true]);
+});
+
+test('plot history keeps the last 20 s of stamps, one sample per /odom', () => {
+  const state = createState();
+  for (let i = 0; i <= 30 * 20; i += 1) onOdometry(state, odometry(0, 0, 1000 + i / 20), i * 50);
+  const t = state.history.t;
+  assert.ok(t.at(-1) - t[0] <= HISTORY_S);
+  assert.ok(t.at(-1) - t[0] >= HISTORY_S - 0.051);
+  assert.equal(state.history.vMeas.length, t.length);
+  assert.equal(state.history.setpointDeg.at(-1), null);
+});
+
+test('message rates over the last two seconds', () => {
+  const state = createState();
+  for (let i = 0; i < 100; i += 1) onOdometry(state, odometry(0, 0, 1 + i / 20), i * 50);
+  assert.equal(rateHz(state, '/odom', 99 * 50), 20.5); // 41 arrivals within 2000 ms inclusive
+  assert.equal(rateHz(state, '/scan', 99 * 50), 0);
+});
+
+test('a world message bumps the version and the bounds', () => {
+  const state = createState();
+  onWorld(state, {
+    markers: [{ ns: 'w', id: 0, type: 3, action: 0, scale: { x: 1 },
+      pose: { position: { x: 2, y: 0 }, orientation: { w: 1 } } }],
+  });
+  assert.equal(state.worldVersion, 1);
+  assert.deepEqual(state.worldBounds, { minX: 1.5, minY: -0.5, maxX: 2.5, maxY: 0.5 });
+});

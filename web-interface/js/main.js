@@ -1,0 +1,49 @@
+// The student page: the view, teleop, readouts, live plots and the heading PID panel.
+
+import { missingLibraries, ROSLIB } from './vendor.js';
+import { Connection, initialWsUrl, loadSiteConfig } from './connection.js';
+import { bindConnectionBar, runFrameLoop } from './connection-bar.js';
+import { createState } from './state.js';
+import { LivePlots } from './plots.js';
+import { PidPanel } from './pid-panel.js';
+import { Readouts } from './readouts.js';
+import {
+  $, closeWithPage, createTeleop, createView, showFatal, subscribeRobot,
+} from './page.js';
+
+async function main() {
+  const missing = missingLibraries();
+  if (missing.length) {
+    showFatal(`Could not load ${missing.join(' and ')} from web-interface/node_modules: run `
+      + '"npm ci" in web-interface/ (or "bash scripts/test.sh") and reload.');
+    return;
+  }
+  const config = await loadSiteConfig();
+  const state = createState();
+  const connection = new Connection(ROSLIB, { url: initialWsUrl(window.location, config.ws) });
+  const bar = bindConnectionBar(connection, {
+    form: $('#connect-form'), input: $('#ws-url'), status: $('#conn-status'),
+    message: $('#view-message'),
+  });
+  subscribeRobot(connection, state);
+  const view = createView(state);
+  const { teleop, limits } = createTeleop(connection, state);
+  const plots = new LivePlots($('#plots'), state, ['linear', 'angular']);
+  const headingPlot = new LivePlots($('#heading-plot'), state, ['heading']);
+  const readouts = new Readouts(connection, state, $('#readouts'));
+  const pid = new PidPanel(connection, state, {
+    form: $('#pid-form'), kp: $('#pid-kp'), ki: $('#pid-ki'), kd: $('#pid-kd'),
+    setpoint: $('#pid-setpoint'), toggle: $('#pid-toggle'), status: $('#pid-status'),
+    error: $('#pid-error'), output: $('#pid-output'),
+  }, () => limits.angular);
+  teleop.addEventListener('drive', () => pid.stop()); // the student takes over
+  pid.addEventListener('start', () => teleop.stop());
+  closeWithPage(connection);
+  runFrameLoop((now) => view.draw(now), (now) => plots.update(now),
+    (now) => headingPlot.update(now),
+    (now) => readouts.update(now), (now) => bar.update(now, state));
+  connection.connect();
+  window.websim = { connection, state, view, teleop, pid }; // for the browser's console
+}
+
+main().catch((error) => showFatal(`The page could not start: ${error.message}`));

@@ -1,0 +1,152 @@
+// The page's live state: messages update it, the animation loop (view.js, plots.js) reads it.
+//
+// Pure functions over a plain object: no DOM and no clock (callers pass nowMs), so the
+// bookkeeping (trail, plot history, message rates, which pose to show) is testable in Node.
+
+import {
+  applyMarkerArray, markerBounds, poseFromOdometry, scanPoints, transformFromTf,
+} from './ros-msgs.js';
+
+/** Seconds of history the live plots show. */
+export const HISTORY_S = 20;
+/** Seconds of trajectory the view keeps, fading with age. */
+export const TRAIL_S = 30;
+/** A new trail point only after this much motion (m): a parked robot adds nothing. */
+export const TRAIL_STEP_M = 0.01;
+/** A pose jump larger than this (m) between two messages breaks the trail (a reset). */
+export const TRAIL_BREAK_M = 0.5;
+/** Ground truth older than this (ms) is gone (a real robot has none): show odometry. */
+export const TRUTH_STALE_MS = 1000;
+/** Message rates are counted over this window (ms). */
+export const RATE_WINDOW_MS = 2000;
+
+export function createState() {
+  return {
+    odom: null, // {x, y, theta, v, omega, stampS, frame} in the odom frame
+    odomAtMs: -Infinity,
+    truth: null, // the same, in the map frame (simulation only)
+    truthAtMs: -Infinity,
+    scan: null, // {points: Float32Array of x, y in the laser frame (m), frame, stampS}
+    scanAtMs: -Infinity,
+    laserMount: { x: 0, y: 0, yaw: 0 }, // laser pose in base_link, from /tf_static
+    markers: new Map(), // the world's walls and discs (map frame), from /world
+    worldBounds: null,
+    worldVersion: 0, // bumped on every /world: view.js re-renders its wall layer
+    trail: { frame: null, points: [] }, // points {x, y, tMs, gap}; gap: no line to it
+    command: { linear: 0, angular: 0 }, // the latest /cmd_vel (m/s, rad/s)
+    setpointDeg: null, // the heading PID's setpoint while it runs
+    history: {
+      t: [], vCmd: [], vMeas: [], wCmd: [], wMeas: [], headingDeg: [], setpointDeg: [],
+    },
+    arrivals: new Map(), // topic -> arrival times (ms) within RATE_WINDOW_MS
+  };
+}
+
+/** Counts one message on `topic` for rateHz(). */
+export function noteArrival(state, topic, nowMs) {
+  let times = state.arrivals.get(topic);
+  if (!times) {
+    times = [];
+    state.arrivals.set(topic, times);
+  }
+  times.push(nowMs);
+  while (times.length && times[0] < nowMs - RATE_WINDOW_MS) times.shift();
+}
+
+/** Messages per second on `topic` over the last RATE_WINDOW_MS. */
+export function rateHz(state, topic, nowMs) {
+  const times = state.arrivals.get(topic) ?? [];
+  const recent = times.filter((t) => t >= nowMs - RATE_WINDOW_MS);
+  return recent.length / (RATE_WINDOW_MS / 1000);
+}
+
+/** The pose to draw and its frame: ground truth (map) while it flows, else odometry (odom). */
+export function displayPose(state, nowMs) {
+  if (state.truth && nowMs - state.truthAtMs <= TRUTH_STALE_MS) {
+    return { pose: state.truth, frame: 'map' };
+  }
+  return state.odom ? { pose: state.odom, frame: 'odom' } : { pose: null, frame: null };
+}
+
+export function onOdometry(state, msg, nowMs) {
+  const pose = poseFromOdometry(msg);
+  if (!pose) return;
+  state.odom = pose;
+  state.odomAtMs = nowMs;
+  noteArrival(state, '/odom', nowMs);
+  recordHistory(state, pose);
+  if (displayPose(state, nowMs).frame === 'odom') extendTrail(state, pose, 'odom', nowMs);
+}
+
+export function onGroundTruth(state, msg, nowMs) {
+  const pose = poseFromOdometry(msg);
+  if (!pose) return;
+  state.truth = pose;
+  state.truthAtMs = nowMs;
+  noteArrival(state, '/ground_truth', nowMs);
+  extendTrail(state, pose, 'map', nowMs);
+}
+
+export function onScan(state, msg, nowMs) {
+  state.scan = {
+    points: scanPoints(msg),
+    frame: msg.header?.frame_id || 'laser',
+    stampS: msg.header?.stamp ? msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 : null,
+  };
+  state.scanAtMs = nowMs;
+  noteArrival(state, '/scan', nowMs);
+}
+
+export function onTfStatic(state, msg) {
+  const mount = transformFromTf(msg, 'base_link', state.scan?.frame || 'laser');
+  if (mount) state.laserMount = mount;
+}
+
+export function onWorld(state, msg) {
+  applyMarkerArray(state.markers, msg);
+  state.worldBounds = markerBounds(state.markers);
+  state.worldVersion += 1;
+}
+
+export function onCommand(state, linear, angular) {
+  state.command = { linear, angular };
+}
+
+/** Forgets the trail (a new connection, or the user's "clear"). */
+export function clearTrail(state) {
+  state.trail = { frame: null, points: [] };
+}
+
+function extendTrail(state, pose, frame, nowMs) {
+  const trail = state.trail;
+  if (trail.frame !== frame) {
+    trail.frame = frame;
+    trail.points = [];
+  }
+  const points = trail.points;
+  const last = points[points.length - 1];
+  const step = last ? Math.hypot(pose.x - last.x, pose.y - last.y) : Infinity;
+  if (!last || step >= TRAIL_STEP_M) {
+    points.push({ x: pose.x, y: pose.y, tMs: nowMs, gap: !last || step > TRAIL_BREAK_M });
+  }
+  while (points.length && points[0].tMs < nowMs - TRAIL_S * 1000) points.shift();
+}
+
+function recordHistory(state, pose) {
+  const h = state.history;
+  const t = pose.stampS;
+  if (t === null) return;
+  if (h.t.length && t < h.t[h.t.length - 1]) {
+    for (const key of Object.keys(h)) h[key].length = 0; // clock went back: a new robot
+  }
+  h.t.push(t);
+  h.vCmd.push(state.command.linear);
+  h.vMeas.push(pose.v);
+  h.wCmd.push(state.command.angular);
+  h.wMeas.push(pose.omega);
+  h.headingDeg.push((pose.theta * 180) / Math.PI);
+  h.setpointDeg.push(state.setpointDeg);
+  let drop = 0;
+  while (drop < h.t.length && h.t[drop] < t - HISTORY_S) drop += 1;
+  if (drop) for (const key of Object.keys(h)) h[key].splice(0, drop);
+}
