@@ -7,12 +7,14 @@ refused with a reason and changes nothing.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from physics import MODES, ConfigError, Simulation
+from physics.validation import as_non_negative_float
 from ros_nodes.messages import Message
 
 # rcl_interfaces/msg/ParameterType
@@ -61,8 +63,14 @@ PARAMETERS = (
     ParameterSpec("max_angular_rps", PARAMETER_DOUBLE, "angular velocity limit (rad/s)"),
     ParameterSpec("max_wheel_force_n", PARAMETER_DOUBLE,
                   "traction force limit per wheel (N); dynamic mode"),
+    ParameterSpec("cmd_vel_timeout_s", PARAMETER_DOUBLE,
+                  "stop when no /cmd_vel arrived for this long (s); 0 keeps the last command "
+                  "(the course's behaviour)"),
 )
 """The parameters ``get/set/list_parameters`` serve, in order."""
+
+CMD_VEL_TIMEOUT_OFF_S = 0.0
+"""The course's behaviour: the robot keeps the last command however old it is."""
 
 _BY_NAME = {spec.name: spec for spec in PARAMETERS}
 
@@ -110,13 +118,22 @@ class RobotParameters:
 
     Args:
         sim: the simulation whose parameters these are.
-        on_change: called with the names set after every successful change.
+        on_change: called with the names set after every successful change (also appended
+            to ``listeners``).
+
+    Attributes:
+        listeners: called, in order, with the names set after every successful change (the
+            rclpy node mirrors changes made through the embedded bridge with one).
+        cmd_vel_timeout_s: the command watchdog (s); 0 is off. Read by ``VirtualRobot``.
     """
 
     def __init__(self, sim: Simulation,
                  on_change: Callable[[list[str]], None] | None = None) -> None:
         self._sim = sim
-        self._on_change = on_change
+        self.listeners: list[Callable[[list[str]], None]] = []
+        if on_change is not None:
+            self.listeners.append(on_change)
+        self.cmd_vel_timeout_s = CMD_VEL_TIMEOUT_OFF_S
 
     @staticmethod
     def names() -> list[str]:
@@ -133,6 +150,8 @@ class RobotParameters:
         spec = _BY_NAME[name]
         if spec.name == "mode":
             return self._sim.mode
+        if spec.name == "cmd_vel_timeout_s":
+            return self.cmd_vel_timeout_s
         return float(getattr(self._sim.params, spec.name))
 
     def set(self, name: str, value: Any) -> None:
@@ -143,14 +162,14 @@ class RobotParameters:
         """
         self.set_many({name: value})
 
-    def set_many(self, values: Mapping[str, Any]) -> None:
-        """Set several parameters at once: all change, or (on any error) none do.
+    def check(self, values: Mapping[str, Any]) -> dict[str, Any]:
+        """Validate a change without making it; returns the values as they would be set.
 
         Raises:
             ConfigError: the first bad name or value, with the reason.
         """
+        checked: dict[str, Any] = {}
         robot_changes: dict[str, float] = {}
-        mode = None
         for name, value in values.items():
             spec = _BY_NAME.get(name)
             if spec is None:
@@ -158,19 +177,35 @@ class RobotParameters:
             if spec.type_code == PARAMETER_STRING:
                 if value not in MODES:
                     raise ConfigError(f"{name}: must be one of {', '.join(MODES)}, got {value!r}")
-                mode = value
+                checked[name] = value
+            elif name == "cmd_vel_timeout_s":
+                checked[name] = as_non_negative_float(name, _double(name, value))
             else:
-                robot_changes[name] = _double(name, value)
+                robot_changes[name] = checked[name] = _double(name, value)
+        dataclasses.replace(self._sim.params, **robot_changes)  # the dataclass validates
+        return checked
+
+    def set_many(self, values: Mapping[str, Any]) -> None:
+        """Set several parameters at once: all change, or (on any error) none do.
+
+        Raises:
+            ConfigError: the first bad name or value, with the reason.
+        """
+        checked = self.check(values)
+        robot_changes = {name: value for name, value in checked.items()
+                         if name not in ("mode", "cmd_vel_timeout_s")}
         previous = self._sim.params
         self._sim.update_params(**robot_changes)
-        if mode is not None:
+        if "mode" in checked:
             try:
-                self._sim.mode = mode
+                self._sim.mode = checked["mode"]
             except ValueError:
                 self._sim.update_params(**{n: getattr(previous, n) for n in robot_changes})
                 raise
-        if self._on_change is not None:
-            self._on_change(list(values))
+        if "cmd_vel_timeout_s" in checked:
+            self.cmd_vel_timeout_s = checked["cmd_vel_timeout_s"]
+        for listener in self.listeners:
+            listener(list(values))
 
 
 def _double(name: str, value: Any) -> float:

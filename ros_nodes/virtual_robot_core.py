@@ -31,6 +31,9 @@ from ros_nodes.topics import GROUND_TRUTH, ODOM, SCAN, TF, TF_STATIC, WORLD, Top
 
 Publication = tuple[TopicSpec, Message]
 
+TIMEOUT_TOLERANCE_S = 1e-9
+"""Rounding slack of the command watchdog: a 0.5 s timeout expires after exactly 10 ticks."""
+
 
 class VirtualRobot:
     """One simulated robot and the messages it publishes.
@@ -38,12 +41,18 @@ class VirtualRobot:
     Args:
         sim: the simulation to drive.
         clock: wall clock for stamps (s since the epoch), as a real robot stamps its messages.
+
+    Attributes:
+        listeners: called with every tick's publications, after ``step`` computed them (the
+            rclpy node of ``websim serve --ros`` publishes them on the ROS graph with one).
     """
 
     def __init__(self, sim: Simulation, clock: Callable[[], float] = time.time) -> None:
         self.sim = sim
         self.parameters = RobotParameters(sim)
+        self.listeners: list[Callable[[list[Publication]], None]] = []
         self._clock = clock
+        self._ticks_since_command = 0
 
     def on_cmd_vel(self, msg: Any, stamped: bool = False) -> None:
         """Apply a ``geometry_msgs/Twist`` (or ``TwistStamped``) dict as the new command.
@@ -53,9 +62,19 @@ class VirtualRobot:
         """
         linear, angular = twist_from_msg(msg, stamped=stamped)
         self.sim.command(linear, angular)
+        self._ticks_since_command = 0
 
     def step(self) -> list[Publication]:
-        """Advance one tick and return the messages due at it (/scan on every second tick)."""
+        """Advance one tick and return the messages due at it (/scan on every second tick).
+
+        With ``cmd_vel_timeout_s`` > 0, a command older than that is replaced by a stop first.
+        """
+        timeout_s = self.parameters.cmd_vel_timeout_s
+        expired = timeout_s > 0.0 and \
+            self._ticks_since_command * self.sim.dt_s >= timeout_s - TIMEOUT_TOLERANCE_S
+        if expired and self.sim.last_command != (0.0, 0.0):
+            self.sim.command(0.0, 0.0)
+        self._ticks_since_command += 1
         self.sim.step()
         now = self._clock()
         state = self.sim.state()
@@ -72,6 +91,8 @@ class VirtualRobot:
         ]
         if state.tick % SCAN.every_ticks == 0:
             out.append((SCAN, laser_scan_msg(self.sim.scan(), now)))
+        for listener in self.listeners:
+            listener(out)
         return out
 
     def latched(self) -> list[Publication]:

@@ -10,15 +10,20 @@ import argparse
 import asyncio
 import errno
 import logging
+import os
 import secrets
 import signal
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from physics.params import PROJECT_DIR
 from ros_nodes.rosbridge.server import SimServer, start_websocket
 from ros_nodes.virtual_robot_core import VirtualRobot
 from websim.http_static import start_http
+
+if TYPE_CHECKING:  # rclpy is imported only with --ros
+    from ros_nodes.ros_graph import RosRuntime
 
 WEB_DIR = PROJECT_DIR / "web-interface"
 """The static frontend."""
@@ -36,6 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="web interface port (default 8080)")
     parser.add_argument("--admin-token", default=None,
                         help="secret for admin rights (default: random, printed at start)")
+    parser.add_argument("--ros", action="store_true",
+                        help="also run the virtual_robot node on the ROS 2 graph and relay "
+                             "rosbridge topics to it (needs rclpy: pip install '.[ros]')")
     parser.add_argument("--web-dir", type=Path, default=WEB_DIR, help=argparse.SUPPRESS)
     parser.add_argument("--log-level", default="warning",
                         choices=["debug", "info", "warning", "error"],
@@ -62,28 +70,70 @@ async def serve_forever(args: argparse.Namespace, robot: VirtualRobot) -> int:
 
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
+    ros = None
+    if args.ros:
+        try:
+            ros = _start_ros(robot, server, loop)
+        except RuntimeError as error:
+            print(f"websim: error: {error}", file=sys.stderr)
+            websocket.close()
+            http.shutdown()
+            http.server_close()
+            return 1
     for signum in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(signum, stop.set)
-    ticker = asyncio.create_task(server.run_ticks())
+    tasks = [asyncio.create_task(server.run_ticks())]
+    if ros is not None:
+        tasks.append(asyncio.create_task(_poll_graph(ros)))
 
     host = _url_host(args.host)
     print(f"websim: world '{robot.sim.world.name}', {robot.sim.mode} mode", flush=True)
     print(f"  page:      http://{host}:{args.http_port}/", flush=True)
     print(f"  websocket: ws://{host}:{args.ws_port}/", flush=True)
     print(f"  admin:     http://{host}:{args.http_port}/admin?token={token}", flush=True)
+    if ros is not None:
+        print(f"  ROS 2:     node /virtual_robot and relay /rosbridge_websocket on "
+              f"ROS_DOMAIN_ID {os.environ.get('ROS_DOMAIN_ID', '0')}", flush=True)
     if args.host in ("0.0.0.0", "::"):
         print("  listening on every network interface: anyone who can reach this machine can "
               "drive the robot; only the admin token can change its parameters", flush=True)
     print("websim: ready (Ctrl+C to stop)", flush=True)
 
     await stop.wait()
-    ticker.cancel()
+    for task in tasks:
+        task.cancel()
+    if ros is not None:
+        ros.stop()
     websocket.close()
     await websocket.wait_closed()
     http.shutdown()
     http.server_close()
     print("websim: stopped", flush=True)
     return 0
+
+
+GRAPH_POLL_PERIOD_S = 0.5
+"""How often subscriptions waiting for a topic to appear on the ROS graph look again."""
+
+
+def _start_ros(robot: VirtualRobot, server: SimServer,
+               loop: asyncio.AbstractEventLoop) -> RosRuntime:
+    """Start rclpy in-process (``--ros``); RuntimeError with the reason if it cannot."""
+    try:
+        from ros_nodes.ros_graph import RosRuntime
+    except ImportError as error:
+        raise RuntimeError(f"--ros needs ROS 2's rclpy: {error} (pip install '.[ros]', "
+                           "or source a ROS 2 installation)") from None
+    runtime = RosRuntime(robot, server.bridge, loop)
+    runtime.start()
+    return runtime
+
+
+async def _poll_graph(ros: RosRuntime) -> None:
+    """Let subscriptions to topics nobody publishes yet start when a publisher appears."""
+    while True:
+        await asyncio.sleep(GRAPH_POLL_PERIOD_S)
+        ros.relay.poll()
 
 
 def _port_error(what: str, host: str, port: int, error: OSError) -> int:

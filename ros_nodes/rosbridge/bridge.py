@@ -9,6 +9,11 @@ and outboxes and calls ``publish`` once per tick. Nothing here awaits or touches
 Errors never close the connection or change anything else: a failed ``call_service`` gets a
 ``service_response`` with ``result: false`` and the reason in ``values``; any other error is
 logged and, for a client that asked with ``set_level``, sent as a ``status`` message.
+
+With a ``Graph`` attached (``websim serve --ros``), topics reach beyond the clients: a
+subscription to a topic the robot does not publish also subscribes on the ROS graph, and what
+clients publish (``/cmd_vel`` included) is also published there. The graph's own messages come
+back through ``publish``. The Graph is the only way out; this module imports no ROS.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 from physics import ConfigError
 from ros_nodes.messages import normalize_service_type, normalize_type
@@ -111,6 +116,32 @@ class _Encoded:
 ServiceHandler = Callable[[Mapping[str, Any], Session], Mapping[str, Any]]
 
 
+class Graph(Protocol):
+    """The ROS 2 graph beyond the bridge, as the bridge uses it; called on the bridge's thread.
+
+    Its messages enter through ``Bridge.publish`` (called on the bridge's thread too). Each
+    method raises ``BridgeError`` with the reason when it cannot do what is asked.
+    """
+
+    def topic_types(self) -> Mapping[str, str]:
+        """The topics on the graph and their types (``pkg/msg/Type``)."""
+
+    def subscribe(self, topic: str, type_name: str | None) -> None:
+        """Relay ``topic`` from the graph; ``type_name`` None: whatever type it turns out to be."""
+
+    def unsubscribe(self, topic: str) -> None:
+        """Stop relaying ``topic`` from the graph."""
+
+    def advertise(self, topic: str, type_name: str) -> None:
+        """Be ready to publish ``topic`` on the graph."""
+
+    def unadvertise(self, topic: str) -> None:
+        """Stop publishing ``topic`` on the graph."""
+
+    def publish(self, topic: str, msg: Any) -> None:
+        """Publish a message (a dict) on an advertised ``topic``."""
+
+
 @dataclass
 class _PendingCall:
     caller: Session
@@ -144,6 +175,10 @@ class Bridge:
         self._providers: dict[str, tuple[Session, str]] = {}
         self._pending: dict[str, _PendingCall] = {}
         self._call_counter = 0
+        self._graph: Graph | None = None
+        self._graph_subscribed: set[str] = set()
+        self._graph_advertised: set[str] = set()
+        self._graph_refused: set[str] = set()
         self._handlers: dict[str, Callable[[Session, dict[str, Any]], None]] = {
             "advertise": self._advertise, "unadvertise": self._unadvertise,
             "publish": self._publish, "subscribe": self._subscribe,
@@ -160,9 +195,22 @@ class Bridge:
         """Offer a service implemented by the server itself."""
         self._services[name] = (normalize_service_type(type_name), handler)
 
+    def attach_graph(self, graph: Graph | None) -> None:
+        """Relay topics to and from a ROS graph from now on (None: stop relaying)."""
+        self._graph = graph
+        self._graph_subscribed.clear()
+        self._graph_advertised.clear()
+        self._graph_refused.clear()
+        if graph is None:
+            return
+        for topic in self._subscribers:
+            self._graph_subscribe(None, topic, None)
+
     def topics(self) -> dict[str, str]:
-        """Every known topic and its type: the robot's and the clients' advertised ones."""
-        return dict(self._topic_types)
+        """Every known topic and its type: the robot's, the clients' and the ROS graph's."""
+        if self._graph is None:
+            return dict(self._topic_types)
+        return {**self._graph.topic_types(), **self._topic_types}
 
     def services(self) -> dict[str, str]:
         """Every service and its type: the server's and the clients' advertised ones."""
@@ -242,6 +290,19 @@ class Bridge:
         type_name = self._known_type(topic, message["type"])
         self._topic_types[topic] = type_name
         session.advertised[topic] = type_name
+        self._graph_advertise(session, topic, type_name)
+
+    def _graph_advertise(self, session: Session, topic: str, type_name: str) -> None:
+        """Publish ``topic`` on the graph too; a failure leaves client-to-client relay working."""
+        if self._graph is None or topic in self._graph_advertised | self._graph_refused:
+            return
+        try:
+            self._graph.advertise(topic, type_name)
+        except BridgeError as error:
+            self._graph_refused.add(topic)  # said once, not at every publish
+            self.report(session, f"{error}; {topic} is relayed between clients only")
+            return
+        self._graph_advertised.add(topic)
 
     def _unadvertise(self, session: Session, message: dict[str, Any]) -> None:
         self._drop_advertisement(session, message["topic"])
@@ -254,6 +315,12 @@ class Bridge:
         if not still_used:
             self._topic_types.pop(topic, None)
             self._latched.pop(topic, None)
+        if self._graph is not None and not any(
+                topic in other.advertised for other in self.sessions):
+            self._graph_refused.discard(topic)
+            if topic in self._graph_advertised:
+                self._graph_advertised.discard(topic)
+                self._graph.unadvertise(topic)
 
     def _publish(self, session: Session, message: dict[str, Any]) -> None:
         topic = message["topic"]
@@ -268,6 +335,13 @@ class Bridge:
         if message.get("latch"):
             self._latched[topic] = encoded
         self._deliver(topic, encoded)
+        if self._graph is not None:
+            if topic not in self._graph_advertised:
+                type_name = session.advertised.get(topic) or self._topic_types.get(topic)
+                if type_name is not None:
+                    self._graph_advertise(session, topic, type_name)
+            if topic in self._graph_advertised:
+                self._graph.publish(topic, msg)
 
     def publish(self, topic: str, msg: Any, latch: bool = False) -> None:
         """Send a message the simulator publishes to every subscriber of ``topic``."""
@@ -307,6 +381,7 @@ class Bridge:
         if compression == "cbor":
             subscription.compression = "cbor"
         self._subscribers.setdefault(topic, set()).add(session)
+        self._graph_subscribe(session, topic, message.get("type") or None)
         latched = self._latched.get(topic)
         if latched is not None:
             _, length = subscription.effective()
@@ -332,6 +407,23 @@ class Bridge:
             subscribers.discard(session)
             if not subscribers:
                 del self._subscribers[topic]
+                if self._graph is not None and topic in self._graph_subscribed:
+                    self._graph_subscribed.discard(topic)
+                    self._graph.unsubscribe(topic)
+
+    def _graph_subscribe(self, session: Session | None, topic: str,
+                         type_name: str | None) -> None:
+        """Also relay ``topic`` from the graph, unless the robot publishes it here."""
+        if self._graph is None or topic in self._owned or topic in self._graph_subscribed:
+            return
+        known = type_name or self._topic_types.get(topic)
+        try:
+            self._graph.subscribe(topic, normalize_type(known) if known else None)
+        except BridgeError as error:
+            if session is not None:
+                self.report(session, f"{error}; {topic} is relayed between clients only")
+            return
+        self._graph_subscribed.add(topic)
 
     # ---- services -------------------------------------------------------------------------
 

@@ -1,0 +1,288 @@
+"""``websim serve --ros``: the virtual_robot node in-process and the bridge relayed to ROS 2.
+
+Threads: the asyncio event loop of ``websim serve`` owns the simulation and the ``Bridge``, as
+without ROS; its tick loop stays the one clock, and each tick's messages go to the browser and,
+through ``VirtualRobotNode.publish`` (rclpy publishers are thread-safe), onto the ROS graph.
+rclpy has no asyncio executor, so a ``SingleThreadedExecutor`` spins in one background thread;
+everything its callbacks do to the robot or the bridge is handed to the loop
+(``loop.call_soon_threadsafe``), and whatever needs an answer (a parameter change, a reset)
+waits for it there. Polling rclpy from the loop instead would add up to a poll period of
+latency to every ROS message and burn CPU while idle.
+
+Two nodes share one rclpy ``Context`` (no global state; rclpy's signal handlers stay off, the
+server handles SIGINT and SIGTERM): ``virtual_robot`` and ``rosbridge_websocket``, the relay
+behind ``GraphRelay``, as a real rosbridge deployment names it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import contextlib
+import logging
+import threading
+from collections.abc import Callable, Mapping
+from typing import Any, TypeVar
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+
+from ros_nodes.messages import Message, normalize_type
+from ros_nodes.ros_interop import (
+    MessageConversionError,
+    PublisherFilter,
+    message_class,
+    to_dict,
+    to_message,
+)
+from ros_nodes.rosbridge.bridge import Bridge, BridgeError
+from ros_nodes.virtual_robot import VirtualRobotNode
+from ros_nodes.virtual_robot_core import VirtualRobot
+
+log = logging.getLogger("websim.ros")
+
+RELAY_NODE_NAME = "rosbridge_websocket"
+"""The relay node's name, as rosbridge_server's."""
+
+CALL_TIMEOUT_S = 2.0
+"""How long an rclpy callback waits for the event loop to answer (a parameter change)."""
+
+RELAY_DEPTH = 10
+"""History depth of relay publishers and subscriptions (rosbridge's default queue size)."""
+
+T = TypeVar("T")
+
+
+class LoopAccess:
+    """Runs functions on the event loop that owns the robot, from any thread.
+
+    Args:
+        loop: the running loop; build this object on its thread.
+        timeout_s: how long ``call`` waits.
+    """
+
+    def __init__(self, loop: asyncio.AbstractEventLoop,
+                 timeout_s: float = CALL_TIMEOUT_S) -> None:
+        self._loop = loop
+        self._loop_thread = threading.get_ident()
+        self._timeout_s = timeout_s
+
+    def call(self, fn: Callable[[], T]) -> T:
+        """Run ``fn`` on the loop and return its result.
+
+        Raises:
+            TimeoutError: the loop did not run it within the timeout (it is stopping).
+        """
+        if threading.get_ident() == self._loop_thread:
+            return fn()
+        future: concurrent.futures.Future[T] = concurrent.futures.Future()
+
+        def run() -> None:
+            if future.set_running_or_notify_cancel():
+                try:
+                    future.set_result(fn())
+                except Exception as error:  # handed to the waiting thread, which re-raises
+                    future.set_exception(error)
+
+        self._loop.call_soon_threadsafe(run)
+        try:
+            return future.result(self._timeout_s)
+        except concurrent.futures.TimeoutError:
+            future.cancel()
+            raise TimeoutError("the event loop did not answer") from None
+
+    def post(self, fn: Callable[[], None]) -> None:
+        """Run ``fn`` on the loop soon; dropped if the loop has closed."""
+        try:
+            self._loop.call_soon_threadsafe(fn)
+        except RuntimeError:
+            log.debug("event loop closed; dropped a call")
+
+
+def publisher_qos(endpoints: list[Any]) -> QoSProfile:
+    """A subscription QoS that connects to every publisher in ``endpoints`` (rosbridge's rule).
+
+    Best effort if any publisher is best effort (a reliable reader cannot match it), transient
+    local if every publisher is (so late subscribers get latched messages).
+    """
+    reliable = all(e.qos_profile.reliability == ReliabilityPolicy.RELIABLE for e in endpoints)
+    latched = bool(endpoints) and all(
+        e.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for e in endpoints)
+    return QoSProfile(depth=RELAY_DEPTH,
+                      reliability=ReliabilityPolicy.RELIABLE if reliable
+                      else ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
+                      else DurabilityPolicy.VOLATILE)
+
+
+class GraphRelay:
+    """The ``Graph`` the bridge relays through: rclpy publishers and subscriptions of one node.
+
+    Its methods run on the bridge's thread (the event loop); subscription callbacks run on the
+    executor thread, convert each message to a dict there and hand it to ``deliver``.
+
+    Args:
+        node: the relay node (``rosbridge_websocket``).
+        deliver: ``deliver(topic, msg_dict)`` gets every message from the graph; it must be
+            safe to call from the executor thread.
+    """
+
+    def __init__(self, node: Node, deliver: Callable[[str, Message], None]) -> None:
+        self._node = node
+        self._deliver = deliver
+        self._subscriptions: dict[str, Any] = {}
+        self._waiting: set[str] = set()
+        self._publishers: dict[str, tuple[Any, Any]] = {}
+
+    def topic_types(self) -> Mapping[str, str]:
+        """Topics on the graph, each with its first type."""
+        return {name: normalize_type(types[0])
+                for name, types in self._node.get_topic_names_and_types() if types}
+
+    def subscribe(self, topic: str, type_name: str | None) -> None:
+        """Relay ``topic`` from the graph; without a type, as soon as one publishes it.
+
+        Raises:
+            BridgeError: the graph carries another type, or the type's package is missing.
+        """
+        graph_type = self.topic_types().get(topic)
+        if type_name is not None and graph_type is not None and graph_type != type_name:
+            raise BridgeError(f"{topic} carries {graph_type} on the ROS graph, not {type_name}")
+        resolved = type_name or graph_type
+        if resolved is None:
+            self._waiting.add(topic)
+            return
+        self._create_subscription(topic, resolved)
+
+    def _create_subscription(self, topic: str, type_name: str) -> None:
+        try:
+            cls = message_class(type_name)
+        except MessageConversionError as error:
+            raise BridgeError(str(error)) from None
+        qos = publisher_qos(self._node.get_publishers_info_by_topic(topic))
+        own = PublisherFilter(self._node, topic, self._node.get_name())
+        deliver = self._deliver
+
+        def relay(msg: Any, info: Any) -> None:
+            if not own.is_from(info):
+                deliver(topic, to_dict(msg))
+
+        self._subscriptions[topic] = self._node.create_subscription(cls, topic, relay, qos)
+        self._waiting.discard(topic)
+
+    def poll(self) -> None:
+        """Start subscriptions that waited for their topic to appear on the graph."""
+        if not self._waiting:
+            return
+        types = self.topic_types()
+        for topic in sorted(self._waiting & types.keys()):
+            try:
+                self._create_subscription(topic, types[topic])
+            except BridgeError as error:
+                log.warning("cannot relay %s from the ROS graph: %s", topic, error)
+                self._waiting.discard(topic)
+
+    def unsubscribe(self, topic: str) -> None:
+        """Stop relaying ``topic`` from the graph."""
+        self._waiting.discard(topic)
+        subscription = self._subscriptions.pop(topic, None)
+        if subscription is not None:
+            self._node.destroy_subscription(subscription)
+
+    def advertise(self, topic: str, type_name: str) -> None:
+        """Create the graph publisher of ``topic``.
+
+        Raises:
+            BridgeError: the graph carries another type, or the type's package is missing.
+        """
+        graph_type = self.topic_types().get(topic)
+        if graph_type is not None and graph_type != type_name:
+            raise BridgeError(f"{topic} carries {graph_type} on the ROS graph, not {type_name}")
+        try:
+            cls = message_class(type_name)
+        except MessageConversionError as error:
+            raise BridgeError(str(error)) from None
+        publisher = self._node.create_publisher(cls, topic, QoSProfile(depth=RELAY_DEPTH))
+        self._publishers[topic] = (publisher, cls)
+
+    def unadvertise(self, topic: str) -> None:
+        """Destroy the graph publisher of ``topic``."""
+        entry = self._publishers.pop(topic, None)
+        if entry is not None:
+            self._node.destroy_publisher(entry[0])
+
+    def publish(self, topic: str, msg: Any) -> None:
+        """Publish a client's message on the graph.
+
+        Raises:
+            BridgeError: the message does not fit the type (the field is named).
+        """
+        publisher, cls = self._publishers[topic]
+        try:
+            publisher.publish(to_message(cls, msg))
+        except MessageConversionError as error:
+            raise BridgeError(f"publish {topic}: {error}") from None
+
+
+class RosRuntime:
+    """rclpy inside ``websim serve``: a context, the two nodes and the executor thread.
+
+    Build it on the event loop's thread (``start``), stop it before the loop ends.
+
+    Args:
+        robot: the robot the server ticks.
+        bridge: the server's bridge, which gets the relay attached.
+        loop: the server's event loop.
+    """
+
+    def __init__(self, robot: VirtualRobot, bridge: Bridge,
+                 loop: asyncio.AbstractEventLoop) -> None:
+        self._bridge = bridge
+        self.context = Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        try:
+            self.robot_node = VirtualRobotNode(robot, access=LoopAccess(loop), own_timer=False,
+                                               ignore_cmd_vel_from=RELAY_NODE_NAME,
+                                               context=self.context)
+            self.relay_node = Node(RELAY_NODE_NAME, context=self.context)
+        except BaseException:
+            self.context.try_shutdown()
+            raise
+
+        def deliver(topic: str, msg: Message) -> None:
+            with contextlib.suppress(RuntimeError):  # the loop closed while shutting down
+                loop.call_soon_threadsafe(bridge.publish, topic, msg)
+
+        self.relay = GraphRelay(self.relay_node, deliver)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.robot_node)
+        self.executor.add_node(self.relay_node)
+        self._thread = threading.Thread(target=self._spin, name="rclpy-executor", daemon=True)
+
+    def start(self) -> None:
+        """Spin the executor and relay the bridge's topics from now on."""
+        self._thread.start()
+        self._bridge.attach_graph(self.relay)
+
+    def _spin(self) -> None:
+        try:
+            self.executor.spin()
+        except ExternalShutdownException:
+            pass
+        except RuntimeError:
+            if self.context.ok():
+                raise
+            # rclpy can fail taking a message whose entity the shutdown destroyed mid-take.
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Detach from the bridge, stop the executor and destroy the nodes."""
+        self._bridge.attach_graph(None)
+        self.executor.shutdown(timeout_sec=timeout_s)
+        self.robot_node.destroy_node()
+        self.relay_node.destroy_node()
+        self.context.try_shutdown()
+        self._thread.join(timeout_s)

@@ -1,0 +1,400 @@
+"""The ``virtual_robot`` rclpy node: the simulated robot on a real ROS 2 graph.
+
+A thin adapter around ``VirtualRobot``, which decides what is published, when and with which
+stamp; the same class runs behind the embedded rosbridge server. The node turns its dicts into
+rclpy messages (``ros_nodes.ros_interop``), publishes them with each topic's QoS
+(``ros_nodes.topics``), feeds ``/cmd_vel`` in, and keeps its ROS parameters and
+``RobotParameters`` the same table, so ``ros2 param set /virtual_robot mass_kg 2.0`` and the
+admin page do the same thing.
+
+Run it with ``websim-robot [--ros-args -p world:=maze -p mode:=dynamic]`` or
+``python -m ros_nodes.virtual_robot``. ``websim serve --ros`` runs it in-process instead, ticked
+by the server (see ``ros_nodes.ros_graph``).
+
+Parameters (``ros2 param describe /virtual_robot NAME`` shows each): ``mode``, ``mass_kg``,
+``inertia_kg_m2``, ``max_linear_mps``, ``max_angular_rps``, ``max_wheel_force_n`` and
+``cmd_vel_timeout_s`` change at runtime; ``world``, ``params_file``, ``seed``, the noise sigmas
+and ``cmd_vel_stamped`` are read at start (read-only afterwards). ``use_sim_time:=true`` makes
+the node publish ``/clock`` (simulated time, which keeps counting across resets) and stamp
+with it. Bad values are refused with the reason; nothing changes.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol, TypeVar
+
+try:
+    import rclpy
+    from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+
+    # Humble has no rclpy.clock_type; later distributions re-export ClockType here.
+    from rclpy.clock import Clock, ClockType  # type: ignore[attr-defined]
+    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import (
+        DurabilityPolicy,
+        QoSProfile,
+        ReliabilityPolicy,
+        qos_profile_sensor_data,
+    )
+    from rosgraph_msgs.msg import Clock as ClockMsg
+    from std_srvs.srv import Empty
+except ImportError as error:  # pragma: no cover - depends on the installation
+    raise ImportError(f"{error}: the virtual_robot node needs rclpy and the ROS message "
+                      "packages (pip install '.[ros]')") from error
+
+from physics import ConfigError, NoiseParams, Simulation, load_params, load_world
+from physics.params import SHIPPED_PARAMS_FILE
+from ros_nodes.messages import stamp
+from ros_nodes.parameters import PARAMETER_DOUBLE, PARAMETERS
+from ros_nodes.ros_interop import (
+    MessageConversionError,
+    PublisherFilter,
+    message_class,
+    to_dict,
+    to_message,
+)
+from ros_nodes.topics import CMD_VEL, PUBLISHED_TOPICS, TopicSpec
+from ros_nodes.virtual_robot_core import Publication, VirtualRobot
+
+NODE_NAME = "virtual_robot"
+"""The node's name, as on the real robot."""
+
+DEFAULT_WORLD = "empty"
+"""The shipped world the node starts in unless ``world`` says otherwise."""
+
+TF_MISSING_WARNING = (
+    "tf2_msgs is not installed, so /tf and /tf_static are not published: it is not on PyPI. "
+    "Build it with 'bash scripts/build_tf2_msgs.sh' (needs cmake and a C compiler) or use a "
+    "ROS 2 installation; 'websim serve --ros' still sends /tf to the browser.")
+
+T = TypeVar("T")
+
+
+class RobotAccess(Protocol):
+    """How the node reaches a robot that another thread may own."""
+
+    def call(self, fn: Callable[[], T]) -> T:
+        """Run ``fn`` where the robot lives, wait, and return its result (or raise)."""
+
+    def post(self, fn: Callable[[], None]) -> None:
+        """Run ``fn`` where the robot lives, without waiting."""
+
+
+class DirectAccess:
+    """The node owns the robot: its executor thread is the only one touching it."""
+
+    def call(self, fn: Callable[[], T]) -> T:
+        """Run ``fn`` now."""
+        return fn()
+
+    def post(self, fn: Callable[[], None]) -> None:
+        """Run ``fn`` now."""
+        fn()
+
+
+def qos_profile(spec: TopicSpec) -> QoSProfile:
+    """The QoS a topic of the robot is published with (``TopicSpec.qos``).
+
+    ``sensor_data`` is rclpy's profile (best effort, depth 5), as lidar drivers use;
+    ``transient_local`` keeps the last message for late subscribers, as tf2's static
+    broadcaster does; ``reliable`` is the ROS default (depth 10).
+    """
+    if spec.qos == "sensor_data":
+        return qos_profile_sensor_data
+    if spec.qos == "transient_local":
+        return QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    return QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def _descriptor(description: str, read_only: bool = False) -> ParameterDescriptor:
+    return ParameterDescriptor(description=description, read_only=read_only)
+
+
+_NOISE_PARAMETERS = {
+    "odom_linear_sigma_mps": "odometry noise on the linear speed, per tick (m/s)",
+    "odom_angular_sigma_rps": "odometry noise on the yaw rate, per tick (rad/s)",
+    "scan_sigma_m": "noise on every LiDAR hit (m)",
+}
+_ROBOT_PARAMETERS = {spec.name: spec for spec in PARAMETERS}
+_DOUBLE_PARAMETERS = {*_NOISE_PARAMETERS,
+                      *(spec.name for spec in PARAMETERS if spec.type_code == PARAMETER_DOUBLE)}
+
+
+class VirtualRobotNode(Node):
+    """The simulated robot as a ROS 2 node.
+
+    Args:
+        robot: the robot to wrap; None builds one from the parameters ``world``,
+            ``params_file`` and ``seed`` and the noise sigmas.
+        access: how to reach ``robot`` (default: directly; ``websim serve --ros`` passes one
+            that runs on the server's event loop).
+        own_timer: tick the robot with a 20 Hz timer; with False, whoever owns the robot
+            ticks it and the node publishes every tick's messages (``VirtualRobot.listeners``).
+        ignore_cmd_vel_from: a node whose /cmd_vel messages are ignored (the in-process
+            rosbridge relay, whose commands the robot already got).
+        **node_kwargs: passed to ``rclpy.node.Node`` (e.g. ``context``).
+
+    Raises:
+        rclpy.exceptions.InvalidParameterValueException: a parameter override is invalid.
+    """
+
+    def __init__(self, robot: VirtualRobot | None = None, *, access: RobotAccess | None = None,
+                 own_timer: bool = True, ignore_cmd_vel_from: str | None = None,
+                 **node_kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **node_kwargs)
+        self._access: RobotAccess = access or DirectAccess()
+        self._ticks = 0
+        self._robot: VirtualRobot | None = None
+        if hasattr(self, "add_post_set_parameters_callback"):  # Iron and later
+            self.add_pre_set_parameters_callback(self._coerce_parameters)
+            self.add_on_set_parameters_callback(self._validate_parameters)
+            self.add_post_set_parameters_callback(self._apply_parameters)
+        else:  # Humble has only the one callback: validate, then apply there
+            self.add_on_set_parameters_callback(self._validate_and_apply_parameters)
+
+        self._use_sim_time = bool(self.get_parameter("use_sim_time").value)
+        self.robot = robot if robot is not None else self._build_robot()
+        self._robot = self.robot
+        self._declare_robot_parameters()
+        self._cmd_vel_stamped = bool(self.declare_parameter(
+            "cmd_vel_stamped", False,
+            _descriptor("subscribe /cmd_vel as geometry_msgs/TwistStamped (as Jazzy's "
+                        "navigation stack publishes) instead of Twist", read_only=True)).value)
+
+        self._robot_publishers: dict[str, Any] = {}
+        self._classes: dict[str, Any] = {}
+        for spec in PUBLISHED_TOPICS:
+            try:
+                cls = message_class(spec.type)
+            except MessageConversionError:
+                if spec.type.startswith("tf2_msgs/"):
+                    continue
+                raise
+            self._classes[spec.name] = cls
+            self._robot_publishers[spec.name] = self.create_publisher(
+                cls, spec.name, qos_profile(spec))
+        if not any(name in self._robot_publishers for name in ("/tf", "/tf_static")):
+            self.get_logger().warning(TF_MISSING_WARNING)
+        self._clock_publisher = (self.create_publisher(ClockMsg, "/clock", 10)
+                                 if self._use_sim_time else None)
+
+        cmd_vel_type = "geometry_msgs/msg/TwistStamped" if self._cmd_vel_stamped \
+            else CMD_VEL.type
+        callback: Callable[..., None] = self._on_cmd_vel
+        if ignore_cmd_vel_from:
+            relay = PublisherFilter(self, CMD_VEL.name, ignore_cmd_vel_from)
+
+            def unless_relayed(msg: Any, info: Any) -> None:  # MessageInfo: Jazzy and later
+                if not relay.is_from(info):
+                    self._on_cmd_vel(msg)
+
+            callback = unless_relayed
+        self.create_subscription(message_class(cmd_vel_type), CMD_VEL.name, callback,
+                                 qos_profile(CMD_VEL))
+        self.create_service(Empty, "/reset_simulation", self._on_reset)
+
+        self.robot.parameters.listeners.append(self._on_robot_parameters_changed)
+        if own_timer:
+            # A steady clock: with use_sim_time the node's own clock follows /clock, which
+            # this very timer publishes.
+            self.create_timer(self.robot.sim.dt_s, self._tick,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+        else:
+            self.robot.listeners.append(self.publish)
+        self.publish(self._access.call(self.robot.latched))
+        sim = self.robot.sim
+        self.get_logger().info(
+            f"world '{sim.world.name}', {sim.mode} mode; /cmd_vel as {cmd_vel_type}"
+            f"{', publishing /clock' if self._use_sim_time else ''}")
+
+    # ---- construction ---------------------------------------------------------------------
+
+    def _build_robot(self) -> VirtualRobot:
+        """The robot the start-up parameters describe (they are validated as declared)."""
+        params_file = str(self.declare_parameter(
+            "params_file", str(SHIPPED_PARAMS_FILE),
+            _descriptor("robot, LiDAR and noise parameter file (YAML)", read_only=True)).value)
+        world = str(self.declare_parameter(
+            "world", DEFAULT_WORLD,
+            _descriptor("world file, or a shipped world's name (empty, maze, corridor)",
+                        read_only=True)).value)
+        seed = int(self.declare_parameter(
+            "seed", 0, _descriptor("seed of the noise generator", read_only=True)).value)
+        platform = load_params(params_file)
+        noise = NoiseParams(**{
+            name: float(self.declare_parameter(name, float(getattr(platform.noise, name)),
+                                               _descriptor(text, read_only=True)).value)
+            for name, text in _NOISE_PARAMETERS.items()})
+        sim = Simulation(load_world(world), platform.robot, seed=seed, lidar=platform.lidar,
+                         noise=noise)
+        return VirtualRobot(sim, clock=self._stamp_time)
+
+    def _declare_robot_parameters(self) -> None:
+        """Declare the runtime parameters at their current values; overrides apply at once."""
+        if not self.has_parameter("world"):  # a robot built elsewhere: describe it
+            sim = self.robot.sim
+            self.declare_parameter("world", sim.world.source,
+                                   _descriptor("the world (read-only here)", read_only=True))
+            for name, text in _NOISE_PARAMETERS.items():
+                self.declare_parameter(name, float(getattr(sim.noise, name)),
+                                       _descriptor(text, read_only=True))
+        parameters = self.robot.parameters
+        current = self._access.call(lambda: {name: parameters.get(name)
+                                             for name in parameters.names()})
+        for spec in PARAMETERS:
+            self.declare_parameter(spec.name, current[spec.name], _descriptor(spec.description))
+
+    def _stamp_time(self) -> float:
+        """Stamps: simulated time (ticks since start) with use_sim_time, else the wall clock."""
+        return self._ticks * self.robot.sim.dt_s if self._use_sim_time else time.time()
+
+    # ---- parameters -----------------------------------------------------------------------
+
+    def _coerce_parameters(self, parameters: list[Parameter[Any]]) -> list[Parameter[Any]]:
+        """Integers for double parameters become doubles (``ros2 param set ... mass_kg 2``)."""
+        return [Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
+                if p.name in _DOUBLE_PARAMETERS and p.type_ == Parameter.Type.INTEGER else p
+                for p in parameters]
+
+    def _validate_parameters(self, parameters: list[Parameter[Any]]) -> SetParametersResult:
+        """Refuse bad values with the reason (also for overrides given at start)."""
+        robot_values = {p.name: p.value for p in parameters if p.name in _ROBOT_PARAMETERS}
+        try:
+            for p in parameters:
+                if p.name == "world":
+                    load_world(str(p.value))
+                elif p.name == "params_file":
+                    load_params(str(p.value))
+                elif p.name in _NOISE_PARAMETERS:
+                    NoiseParams(**{p.name: p.value})
+            if robot_values and self._robot is not None:
+                robot = self._robot
+                self._access.call(lambda: robot.parameters.check(robot_values))
+        except ConfigError as error:
+            return SetParametersResult(successful=False, reason=str(error))
+        except TimeoutError:
+            return SetParametersResult(successful=False, reason="the simulation is not running")
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters: list[Parameter[Any]]) -> None:
+        """Make validated runtime changes in the simulation (unless it already has them)."""
+        robot = self._robot
+        values = {p.name: p.value for p in parameters if p.name in _ROBOT_PARAMETERS}
+        if robot is None or not values:
+            return
+
+        def apply() -> None:
+            changed = {name: value for name, value in values.items()
+                       if robot.parameters.get(name) != value}
+            if changed:
+                robot.parameters.set_many(changed)
+
+        try:
+            self._access.call(apply)
+        except (ConfigError, TimeoutError) as error:
+            self.get_logger().error(f"parameters {sorted(values)} not applied: {error}")
+
+    def _validate_and_apply_parameters(self, parameters: list[Parameter[Any]]
+                                       ) -> SetParametersResult:
+        result = self._validate_parameters(parameters)
+        if result.successful:
+            self._apply_parameters(parameters)
+        return result
+
+    def _on_robot_parameters_changed(self, names: list[str]) -> None:
+        """A change made elsewhere (the admin page): mirror it into the node's parameters."""
+        executor = self.executor
+        if executor is not None:
+            executor.create_task(self._sync_parameters, names)
+
+    def _sync_parameters(self, names: list[str]) -> None:
+        robot = self.robot
+        current = self._access.call(lambda: {name: robot.parameters.get(name)
+                                             for name in names if name in _ROBOT_PARAMETERS})
+        stale = [Parameter(name, value=value) for name, value in current.items()
+                 if self.get_parameter(name).value != value]
+        if stale:
+            self.set_parameters(stale)
+
+    # ---- topics and services --------------------------------------------------------------
+
+    def _tick(self) -> None:
+        self._ticks += 1
+        if self._clock_publisher is not None:
+            time_msg = stamp(self._stamp_time())
+            clock = ClockMsg()
+            clock.clock.sec, clock.clock.nanosec = time_msg["sec"], time_msg["nanosec"]
+            self._clock_publisher.publish(clock)
+        self.publish(self.robot.step())
+
+    def publish(self, publications: Sequence[Publication]) -> None:
+        """Publish the robot's messages (dicts) on the ROS graph; thread-safe."""
+        for spec, msg in publications:
+            publisher = self._robot_publishers.get(spec.name)
+            if publisher is not None:
+                publisher.publish(to_message(self._classes[spec.name], msg, strict=False))
+
+    def _on_cmd_vel(self, msg: Any) -> None:
+        values, robot, stamped = to_dict(msg), self.robot, self._cmd_vel_stamped
+        logger = self.get_logger()
+
+        def apply() -> None:
+            try:
+                robot.on_cmd_vel(values, stamped=stamped)
+            except ConfigError as error:
+                logger.warning(f"/cmd_vel refused: {error}")
+
+        self._access.post(apply)
+
+    def _on_reset(self, request: Any, response: Any) -> Any:
+        self._access.call(self.robot.reset)
+        return response
+
+    def destroy_node(self) -> None:
+        """Stop listening to the robot, then destroy the node."""
+        robot = self._robot  # None if the constructor failed
+        if robot is not None and self._on_robot_parameters_changed in robot.parameters.listeners:
+            robot.parameters.listeners.remove(self._on_robot_parameters_changed)
+        if robot is not None and self.publish in robot.listeners:
+            robot.listeners.remove(self.publish)
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the node until Ctrl+C or SIGTERM; ``args`` default to ``sys.argv``.
+
+    Returns:
+        0 after a clean shutdown, 2 when a parameter is invalid (the reason is printed).
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = VirtualRobotNode()
+        rclpy.spin(node)
+    except (InvalidParameterValueException, InvalidParameterTypeException,
+            ConfigError) as error:
+        print(f"websim-robot: error: {error}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except RuntimeError:
+        if rclpy.ok():
+            raise
+        # rclpy can fail taking a message that a signal's shutdown destroyed mid-take.
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

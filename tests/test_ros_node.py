@@ -1,0 +1,548 @@
+"""The virtual_robot rclpy node and ``websim serve --ros`` on a real ROS 2 graph.
+
+Real processes (``websim-robot``, ``websim serve --ros``) and a real rclpy node in this test
+process. Each test runs on its own ROS_DOMAIN_ID with discovery kept on this machine, so tests
+never see each other or the network. Every wait polls with a bound.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import itertools
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="rclpy not installed (pip install .[ros])")
+# rosidl's parser imports lark, which imports deprecated modules; not ours to fix.
+pytestmark = pytest.mark.filterwarnings("ignore:module 'sre_:DeprecationWarning")
+
+import roslibpy  # noqa: E402
+from geometry_msgs.msg import Twist  # noqa: E402
+from nav_msgs.msg import Odometry  # noqa: E402
+from rcl_interfaces.msg import ParameterType  # noqa: E402
+from rcl_interfaces.srv import GetParameters, SetParameters  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rclpy.parameter import Parameter, parameter_value_to_python  # noqa: E402
+from rclpy.qos import (  # noqa: E402
+    DurabilityPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+from rclpy.signals import SignalHandlerOptions  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from sensor_msgs.msg import LaserScan  # noqa: E402
+from std_msgs.msg import String  # noqa: E402
+from std_srvs.srv import Empty  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
+
+from physics import RobotParams, Simulation, load_world  # noqa: E402
+from ros_nodes.messages import Float32Sequence  # noqa: E402
+from ros_nodes.parameters import PARAMETER_DOUBLE  # noqa: E402
+from ros_nodes.ros_interop import (  # noqa: E402
+    MessageConversionError,
+    message_class,
+    to_dict,
+    to_message,
+)
+from ros_nodes.topics import PUBLISHED_TOPICS  # noqa: E402
+from ros_nodes.virtual_robot import TF_MISSING_WARNING  # noqa: E402
+from ros_nodes.virtual_robot_core import VirtualRobot  # noqa: E402
+
+from server_process import ServerProcess, start_server, wait_for  # noqa: E402
+
+HAS_TF2_MSGS = importlib.util.find_spec("tf2_msgs") is not None
+
+WALL_X_M = 2.0
+"""The test world's one wall: x = 2 m, so beam 0 (straight ahead at spawn) reads 2 m."""
+
+TEST_WORLD = f"""\
+name: ros-test
+walls:
+  - [{WALL_X_M}, -2.0, {WALL_X_M}, 2.0]
+"""
+
+RELIABLE = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+DT_S = 0.05
+STARTUP_TIMEOUT_S = 30.0
+
+
+@pytest.fixture(scope="session")
+def domain_ids() -> Iterator[int]:
+    """ROS_DOMAIN_IDs 1..100, distinct within the session, offset by the process id."""
+    start = os.getpid() % 100
+    return ((start + n) % 100 + 1 for n in itertools.count())
+
+
+@pytest.fixture
+def domain(domain_ids: Iterator[int], monkeypatch: pytest.MonkeyPatch) -> int:
+    """This test's domain, set in the environment that this process and its children use."""
+    domain_id = next(domain_ids)
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("ROS_LOCALHOST_ONLY", "1")
+    return domain_id
+
+
+class Graph:
+    """This test's own rclpy node, spun on the test thread while waiting."""
+
+    def __init__(self, domain_id: int) -> None:
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id,
+                   signal_handler_options=SignalHandlerOptions.NO)
+        self.node = Node("websim_test", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def spin_until(self, condition: Callable[[], Any], timeout_s: float = 10.0,
+                   what: str = "condition") -> Any:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            result = condition()
+            if result:
+                return result
+            if time.monotonic() > deadline:
+                raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def collect(self, msg_type: Any, topic: str, qos: QoSProfile) -> list[tuple[float, Any]]:
+        """Subscribe; the list fills with (receive time, message) while spinning."""
+        received: list[tuple[float, Any]] = []
+        self.node.create_subscription(msg_type, topic,
+                                      lambda msg: received.append((time.monotonic(), msg)), qos)
+        return received
+
+    def call(self, srv_type: Any, name: str, request: Any, timeout_s: float = 10.0) -> Any:
+        client = self.node.create_client(srv_type, name)
+        self.spin_until(client.service_is_ready, timeout_s, f"service {name}")
+        future = client.call_async(request)
+        self.spin_until(future.done, timeout_s, f"answer from {name}")
+        self.node.destroy_client(client)
+        return future.result()
+
+    def set_parameters(self, **values: Any) -> list[Any]:
+        request = SetParameters.Request(parameters=[
+            Parameter(name, value=value).to_parameter_msg() for name, value in values.items()])
+        return list(self.call(SetParameters, "/virtual_robot/set_parameters", request).results)
+
+    def get_parameter(self, name: str) -> Any:
+        response = self.call(GetParameters, "/virtual_robot/get_parameters",
+                             GetParameters.Request(names=[name]))
+        return parameter_value_to_python(response.values[0])
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+@pytest.fixture
+def graph(domain: int) -> Iterator[Graph]:
+    running = Graph(domain)
+    yield running
+    running.close()
+
+
+@dataclass
+class RobotProcess:
+    """A running ``websim-robot``."""
+
+    process: subprocess.Popen[str]
+    output: list[str] = field(default_factory=list)
+
+    def stop(self, timeout_s: float = 10.0) -> int:
+        """Ctrl+C, as a terminal or ros2 launch sends it; returns the exit code."""
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+        try:
+            out, _ = self.process.communicate(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            out, _ = self.process.communicate()
+        self.output.append(out or "")
+        return self.process.returncode
+
+
+def robot_command(*parameters: str) -> list[str]:
+    """``websim-robot --ros-args -p ...`` (the module if the script is not on PATH)."""
+    script = shutil.which("websim-robot")
+    base = [script] if script else [sys.executable, "-m", "ros_nodes.virtual_robot"]
+    args = [arg for parameter in parameters for arg in ("-p", parameter)]
+    return [*base, "--ros-args", *args] if args else base
+
+
+@pytest.fixture
+def test_world(tmp_path: Path) -> Path:
+    path = tmp_path / "ros_test.yaml"
+    path.write_text(TEST_WORLD)
+    return path
+
+
+@pytest.fixture
+def start_robot(graph: Graph, test_world: Path) -> Iterator[Callable[..., RobotProcess]]:
+    """Start ``websim-robot`` on the test world and wait until it publishes /odom."""
+    started: list[RobotProcess] = []
+
+    def start(*parameters: str) -> RobotProcess:
+        command = robot_command(f"world:={test_world}", *parameters)
+        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                   text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        robot = RobotProcess(process)
+        started.append(robot)
+
+        def publishing() -> bool:
+            if process.poll() is not None:
+                out, _ = process.communicate()
+                raise AssertionError(f"websim-robot exited with {process.returncode}:\n{out}")
+            return graph.node.count_publishers("/odom") > 0
+
+        graph.spin_until(publishing, STARTUP_TIMEOUT_S, "websim-robot to publish /odom")
+        return robot
+
+    yield start
+    for robot in started:
+        code = robot.stop()
+        assert code == 0, f"websim-robot exited with {code}:\n{''.join(robot.output)}"
+
+
+def twist(linear: float = 0.0, angular: float = 0.0) -> Twist:
+    msg = Twist()
+    msg.linear.x = float(linear)
+    msg.angular.z = float(angular)
+    return msg
+
+
+def rate_hz(received: list[tuple[float, Any]]) -> float:
+    return (len(received) - 1) / (received[-1][0] - received[0][0])
+
+
+# ---- dicts <-> rclpy messages ------------------------------------------------------------
+
+
+def test_every_robot_message_converts_and_comes_back_unchanged() -> None:
+    robot = VirtualRobot(Simulation(load_world("maze"), seed=0))
+    robot.on_cmd_vel({"linear": {"x": 0.2}, "angular": {"z": 0.4}})
+    publications = robot.latched() + robot.step() + robot.step()
+    assert {spec.name for spec, _ in publications} == {topic.name for topic in PUBLISHED_TOPICS}
+    for spec, msg in publications:
+        if spec.type.startswith("tf2_msgs/") and not HAS_TF2_MSGS:
+            continue
+        ros_msg = to_message(message_class(spec.type), msg)
+        back = to_dict(ros_msg)
+        if spec.name == "/scan":  # float32 on the wire
+            assert isinstance(back["ranges"], Float32Sequence)
+            assert back["ranges"] == pytest.approx(msg["ranges"], rel=1e-7)
+            back["ranges"] = msg["ranges"]
+        assert back == msg, spec.name
+
+
+def test_uint8_arrays_are_base64_and_errors_name_the_field() -> None:
+    from sensor_msgs.msg import CompressedImage
+
+    image = to_message(CompressedImage, {"format": "png", "data": "AAEC/w=="})
+    assert list(image.data) == [0, 1, 2, 255]
+    assert to_dict(image)["data"] == "AAEC/w=="
+    with pytest.raises(MessageConversionError, match=r"linear\.x: expected a number"):
+        to_message(Twist, {"linear": {"x": "fast"}})
+    with pytest.raises(MessageConversionError, match=r"lineer: .* has no such field"):
+        to_message(Twist, {"lineer": {}})
+    with pytest.raises(MessageConversionError, match="pip install ros-no-such-msgs"):
+        message_class("no_such_msgs/msg/Thing")
+
+
+# ---- websim-robot ------------------------------------------------------------------------
+
+
+def test_topics_types_rates_frames_and_qos(graph: Graph,
+                                           start_robot: Callable[..., RobotProcess]) -> None:
+    robot = start_robot()
+    odom = graph.collect(Odometry, "/odom", RELIABLE)
+    scans = graph.collect(LaserScan, "/scan", qos_profile_sensor_data)
+    truth = graph.collect(Odometry, "/ground_truth", RELIABLE)
+    world = graph.collect(MarkerArray, "/world", LATCHED)
+    graph.spin_until(lambda: len(odom) >= 61 and len(scans) >= 31, 15.0, "3 s of /odom, /scan")
+
+    assert rate_hz(odom) == pytest.approx(20.0, rel=0.1)
+    assert rate_hz(scans) == pytest.approx(10.0, rel=0.1)
+    types = dict(graph.node.get_topic_names_and_types())
+    assert types["/odom"] == ["nav_msgs/msg/Odometry"]
+    assert types["/scan"] == ["sensor_msgs/msg/LaserScan"]
+    assert types["/ground_truth"] == ["nav_msgs/msg/Odometry"]
+    assert types["/world"] == ["visualization_msgs/msg/MarkerArray"]
+    assert [info.topic_type for info in
+            graph.node.get_subscriptions_info_by_topic("/cmd_vel")] == ["geometry_msgs/msg/Twist"]
+    scan_qos = graph.node.get_publishers_info_by_topic("/scan")[0].qos_profile
+    assert scan_qos.reliability == ReliabilityPolicy.BEST_EFFORT
+    world_qos = graph.node.get_publishers_info_by_topic("/world")[0].qos_profile
+    assert world_qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
+
+    last_odom, scan = odom[-1][1], scans[-1][1]
+    assert (last_odom.header.frame_id, last_odom.child_frame_id) == ("odom", "base_link")
+    assert truth[-1][1].header.frame_id == "map"
+    assert scan.header.frame_id == "laser"
+    assert len(scan.ranges) == 360
+    assert scan.angle_min + 359 * scan.angle_increment == pytest.approx(scan.angle_max)
+    assert scan.ranges[0] == pytest.approx(WALL_X_M, abs=1e-6)  # float32
+    # A late subscriber still gets the latched world: its one wall as a LINE_LIST.
+    graph.spin_until(lambda: world, 5.0, "latched /world")
+    wall = world[0][1].markers[0]
+    assert wall.header.frame_id == "map"
+    assert [(p.x, p.y) for p in wall.points] == [(WALL_X_M, -2.0), (WALL_X_M, 2.0)]
+
+    if HAS_TF2_MSGS:
+        from tf2_msgs.msg import TFMessage
+
+        tf_static = graph.collect(TFMessage, "/tf_static", LATCHED)
+        tf = graph.collect(TFMessage, "/tf", RELIABLE)
+        graph.spin_until(lambda: tf_static and tf, 5.0, "/tf and /tf_static")
+        static = tf_static[0][1].transforms[0]
+        assert (static.header.frame_id, static.child_frame_id) == ("base_link", "laser")
+        moving = tf[-1][1].transforms[0]
+        assert (moving.header.frame_id, moving.child_frame_id) == ("odom", "base_link")
+    assert robot.stop() == 0
+    warnings = "".join(robot.output).count(TF_MISSING_WARNING)
+    assert warnings == (0 if HAS_TF2_MSGS else 1)
+
+
+def test_cmd_vel_drives_at_the_commanded_speed(graph: Graph,
+                                               start_robot: Callable[..., RobotProcess]) -> None:
+    start_robot()
+    odom = graph.collect(Odometry, "/odom", RELIABLE)
+    cmd_vel = graph.node.create_publisher(Twist, "/cmd_vel", 10)
+    graph.spin_until(lambda: cmd_vel.get_subscription_count() > 0, 10.0, "/cmd_vel subscriber")
+    cmd_vel.publish(twist(0.3))
+    graph.spin_until(lambda: odom and odom[-1][1].pose.pose.position.x > 0.3, 10.0, "driving")
+    cmd_vel.publish(twist())
+    moving = [msg for _, msg in odom if msg.twist.twist.linear.x > 0]
+    # Kinematic mode: every tick moves exactly v * dt along x.
+    steps = [b.pose.pose.position.x - a.pose.pose.position.x
+             for a, b in itertools.pairwise(moving)]
+    assert steps and all(step == pytest.approx(0.3 * DT_S, abs=1e-9) for step in steps)
+    assert moving[-1].twist.twist.linear.x == pytest.approx(0.3)
+
+
+def test_cmd_vel_timeout_stops_after_the_timeout(graph: Graph,
+                                                  start_robot: Callable[..., RobotProcess]) -> None:
+    start_robot("cmd_vel_timeout_s:=0.5")
+    odom = graph.collect(Odometry, "/odom", RELIABLE)
+    cmd_vel = graph.node.create_publisher(Twist, "/cmd_vel", 10)
+    graph.spin_until(lambda: cmd_vel.get_subscription_count() > 0, 10.0, "/cmd_vel subscriber")
+    cmd_vel.publish(twist(0.3))
+    graph.spin_until(lambda: any(m.twist.twist.linear.x > 0 for _, m in odom), 10.0, "motion")
+    graph.spin_until(lambda: odom[-1][1].twist.twist.linear.x == 0.0, 10.0, "the watchdog stop")
+    # 0.5 s of 0.3 m/s: ten ticks of 15 mm.
+    assert odom[-1][1].pose.pose.position.x == pytest.approx(0.15, abs=1e-9)
+    assert graph.get_parameter("cmd_vel_timeout_s") == 0.5
+
+
+def _acceleration_mps2(graph: Graph, truth: list[tuple[float, Any]], cmd_vel: Any) -> float:
+    """Command 0.5 m/s from rest; the true acceleration over the ticks before the limit."""
+    graph.call(Empty, "/reset_simulation", Empty.Request())
+    start = len(truth)
+    cmd_vel.publish(twist(0.5))
+    graph.spin_until(lambda: any(m.twist.twist.linear.x >= 0.45 for _, m in truth[start:]),
+                     10.0, "speed 0.45 m/s")
+    cmd_vel.publish(twist())
+    speeds = [m.twist.twist.linear.x for _, m in truth[start:]]
+    first = next(i for i, v in enumerate(speeds) if v > 0)
+    last = next(i for i, v in enumerate(speeds) if v >= 0.45)
+    if last == first:
+        return speeds[first] / DT_S
+    # /ground_truth is reliable: one message per tick, so the index counts ticks.
+    return (speeds[last] - speeds[first]) / ((last - first) * DT_S)
+
+
+def test_mass_parameter_changes_dynamic_motion(graph: Graph,
+                                               start_robot: Callable[..., RobotProcess]) -> None:
+    start_robot("mode:=dynamic")
+    truth = graph.collect(Odometry, "/ground_truth", RELIABLE)
+    cmd_vel = graph.node.create_publisher(Twist, "/cmd_vel", 10)
+    graph.spin_until(lambda: cmd_vel.get_subscription_count() > 0, 10.0, "/cmd_vel subscriber")
+    params = RobotParams()
+    light = _acceleration_mps2(graph, truth, cmd_vel)
+    assert light == pytest.approx(params.max_linear_accel_mps2, rel=0.1)  # 2.5 m/s^2
+
+    # An integer, as `ros2 param set /virtual_robot mass_kg 12` sends it, is taken as a double.
+    assert [r.successful for r in graph.set_parameters(mass_kg=12)] == [True]
+    assert graph.get_parameter("mass_kg") == 12.0
+    heavy = _acceleration_mps2(graph, truth, cmd_vel)
+    assert heavy == pytest.approx(2.0 * params.max_wheel_force_n / 12.0, rel=0.1)  # 0.25
+
+
+def test_invalid_parameters_are_refused_with_the_reason(
+        graph: Graph, start_robot: Callable[..., RobotProcess]) -> None:
+    start_robot()
+    negative, = graph.set_parameters(mass_kg=-1.0)
+    assert not negative.successful
+    assert "mass_kg: must be > 0, got -1.0" in negative.reason
+    flying, = graph.set_parameters(mode="flying")
+    assert not flying.successful and "must be one of kinematic, dynamic" in flying.reason
+    timeout, = graph.set_parameters(cmd_vel_timeout_s=-0.1)
+    assert not timeout.successful and "cmd_vel_timeout_s" in timeout.reason
+    world, = graph.set_parameters(world="maze")
+    assert not world.successful and "read-only" in world.reason
+    assert graph.get_parameter("mass_kg") == RobotParams().mass_kg
+    assert graph.get_parameter("mode") == "kinematic"
+
+
+@pytest.mark.parametrize(("override", "reason"), [
+    ("world:=no_such_world", "no_such_world"),
+    ("mass_kg:=-2.0", "mass_kg: must be > 0"),
+    ("scan_sigma_m:=-1.0", "scan_sigma_m"),
+])
+def test_invalid_start_parameters_exit_with_the_reason(domain: int, override: str,
+                                                        reason: str) -> None:
+    result = subprocess.run(robot_command(override), capture_output=True, text=True,
+                            timeout=STARTUP_TIMEOUT_S)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert reason in result.stderr
+
+
+def test_reset_simulation_returns_to_spawn(graph: Graph,
+                                           start_robot: Callable[..., RobotProcess]) -> None:
+    start_robot()
+    odom = graph.collect(Odometry, "/odom", RELIABLE)
+    cmd_vel = graph.node.create_publisher(Twist, "/cmd_vel", 10)
+    graph.spin_until(lambda: cmd_vel.get_subscription_count() > 0, 10.0, "/cmd_vel subscriber")
+    cmd_vel.publish(twist(0.4, 1.0))
+    graph.spin_until(lambda: odom and odom[-1][1].pose.pose.position.x > 0.1, 10.0, "driving")
+    graph.call(Empty, "/reset_simulation", Empty.Request())
+    start = len(odom)
+    graph.spin_until(lambda: len(odom) > start + 2, 5.0, "odometry after the reset")
+    after = odom[-1][1]
+    pose = after.pose.pose
+    assert (pose.position.x, pose.position.y, pose.orientation.z) == (0.0, 0.0, 0.0)
+    assert after.twist.twist.linear.x == 0.0  # the reset also zeroes the command
+
+
+def test_use_sim_time_publishes_clock_and_stamps_with_it(
+        graph: Graph, start_robot: Callable[..., RobotProcess]) -> None:
+    start_robot("use_sim_time:=true")
+    clock = graph.collect(Clock, "/clock", QoSProfile(depth=50))
+    odom = graph.collect(Odometry, "/odom", RELIABLE)
+    graph.spin_until(lambda: len(clock) >= 10 and len(odom) >= 10, 10.0, "/clock and /odom")
+    clock_ns = [m.clock.sec * 10**9 + m.clock.nanosec for _, m in clock]
+    assert all(b - a == DT_S * 1e9 for a, b in itertools.pairwise(clock_ns))
+    stamps_ns = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for _, m in odom]
+    # Stamped with simulated time (seconds since start, not since 1970), tick by tick.
+    assert set(stamps_ns) & set(clock_ns)
+    assert all(stamp % round(DT_S * 1e9) == 0 for stamp in stamps_ns)
+    assert max(stamps_ns) < 1000 * 10**9
+
+
+# ---- websim serve --ros ------------------------------------------------------------------
+
+
+@pytest.fixture
+def ros_server(domain: int, test_world: Path) -> Iterator[ServerProcess]:
+    running = start_server(["--ros", "--world", str(test_world)])
+    yield running
+    assert running.stop() == 0, "".join(running.output)
+
+
+@pytest.fixture
+def browser(ros_server: ServerProcess) -> Iterator[roslibpy.Ros]:
+    client = roslibpy.Ros(host="127.0.0.1", port=ros_server.ws_port)
+    client.run(timeout=10)
+    yield client
+    client.close()
+
+
+def test_serve_ros_browser_and_rclpy_drive_the_same_robot(
+        graph: Graph, ros_server: ServerProcess, browser: roslibpy.Ros) -> None:
+    graph.spin_until(lambda: graph.node.count_publishers("/odom") > 0, STARTUP_TIMEOUT_S,
+                     "the in-process virtual_robot node")
+    ros_odom = graph.collect(Odometry, "/odom", RELIABLE)
+    seen_cmd_vel = graph.collect(Twist, "/cmd_vel", RELIABLE)
+    browser_odom: list[dict[str, Any]] = []
+    roslibpy.Topic(browser, "/odom", "nav_msgs/msg/Odometry").subscribe(browser_odom.append)
+
+    # A student's rclpy node drives; the browser sees the motion.
+    cmd_vel = graph.node.create_publisher(Twist, "/cmd_vel", 10)
+    graph.spin_until(lambda: cmd_vel.get_subscription_count() > 0, 10.0, "/cmd_vel subscriber")
+    cmd_vel.publish(twist(0.3))
+    wait_for(lambda: browser_odom and browser_odom[-1]["twist"]["twist"]["linear"]["x"] == 0.3,
+             10.0, "the browser to see the rclpy command")
+
+    # The browser drives; the rclpy node sees the motion and the command itself.
+    browser_cmd = roslibpy.Topic(browser, "/cmd_vel", "geometry_msgs/msg/Twist")
+    browser_cmd.advertise()
+    browser_cmd.publish(roslibpy.Message({"linear": {"x": 0.0, "y": 0.0, "z": 0.0},
+                                          "angular": {"x": 0.0, "y": 0.0, "z": 0.5}}))
+    graph.spin_until(lambda: ros_odom and ros_odom[-1][1].twist.twist.angular.z == 0.5, 10.0,
+                     "rclpy to see the browser's command")
+    assert ros_odom[-1][1].twist.twist.linear.x == 0.0
+    graph.spin_until(lambda: any(m.angular.z == 0.5 for _, m in seen_cmd_vel), 5.0,
+                     "the browser's /cmd_vel on the ROS graph")
+
+    # One parameter table: the admin page's change shows in the node's ROS parameters.
+    admin = roslibpy.Ros(host=ros_server.admin_ws_url)
+    admin.run(timeout=10)
+    try:
+        reply = roslibpy.Service(admin, "/virtual_robot/set_parameters",
+                                 "rcl_interfaces/srv/SetParameters").call(
+            roslibpy.ServiceRequest({"parameters": [{"name": "mass_kg", "value": {
+                "type": PARAMETER_DOUBLE, "double_value": 3.5}}]}), timeout=5)
+    finally:
+        admin.close()
+    assert reply["results"][0]["successful"] is True
+    graph.spin_until(lambda: graph.get_parameter("mass_kg") == 3.5, 5.0,
+                     "the admin page's mass_kg in the ROS parameters")
+    # And the other way: ros2 param set, seen by the browser's parameter service.
+    assert [r.successful for r in graph.set_parameters(mass_kg=4.0)] == [True]
+    got = roslibpy.Service(browser, "/virtual_robot/get_parameters",
+                           "rcl_interfaces/srv/GetParameters").call(
+        roslibpy.ServiceRequest({"names": ["mass_kg"]}), timeout=5)
+    assert got["values"][0]["type"] == ParameterType.PARAMETER_DOUBLE
+    assert got["values"][0]["double_value"] == 4.0
+
+
+def test_serve_ros_relays_graph_topics_both_ways(
+        graph: Graph, ros_server: ServerProcess, browser: roslibpy.Ros) -> None:
+    # A topic only the ROS graph has: the browser subscribes before anyone publishes it.
+    heard: list[dict[str, Any]] = []
+    roslibpy.Topic(browser, "/chatter", "std_msgs/msg/String",
+                   queue_length=10).subscribe(heard.append)
+    chatter = graph.node.create_publisher(String, "/chatter", 10)
+    graph.spin_until(lambda: chatter.get_subscription_count() > 0, 10.0, "the relay to subscribe")
+    for index in range(3):
+        chatter.publish(String(data=f"hello {index}"))
+    wait_for(lambda: len(heard) >= 3, 10.0, "/chatter in the browser")
+    assert [m["data"] for m in heard[:3]] == ["hello 0", "hello 1", "hello 2"]
+
+    # A browser topic reaches rclpy once per message: the relay's own messages do not come
+    # back to the browser through the graph.
+    received = graph.collect(String, "/from_browser", RELIABLE)
+    in_browser: list[dict[str, Any]] = []
+    talker = roslibpy.Topic(browser, "/from_browser", "std_msgs/msg/String", queue_length=10)
+    talker.subscribe(in_browser.append)
+    talker.advertise()
+    graph.spin_until(lambda: graph.node.count_publishers("/from_browser") > 0, 10.0,
+                     "the relay to publish /from_browser")
+    for text in ("a", "b"):
+        talker.publish(roslibpy.Message({"data": text}))
+    graph.spin_until(lambda: len(received) >= 2, 10.0, "the browser's messages in rclpy")
+    assert [m.data for _, m in received] == ["a", "b"]
+    # A message from rclpy comes through the graph after any echo of "a" and "b" would have.
+    rclpy_talker = graph.node.create_publisher(String, "/from_browser", 10)
+    graph.spin_until(lambda: rclpy_talker.get_subscription_count() >= 2, 10.0,
+                     "the relay and this test to subscribe")  # the test's own counts too
+    rclpy_talker.publish(String(data="c"))
+    wait_for(lambda: any(m["data"] == "c" for m in in_browser), 10.0, "rclpy's message")
+    assert [m["data"] for m in in_browser] == ["a", "b", "c"]
+    assert "/chatter" in browser.get_topics()
