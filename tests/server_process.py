@@ -62,15 +62,22 @@ class ServerProcess:
             return dict(json.load(response))
 
     def stop(self, timeout_s: float = 10.0) -> int:
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGTERM)
-        try:
-            out, _ = self.process.communicate(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            out, _ = self.process.communicate()
-        self.output.append(out or "")
-        return self.process.returncode
+        """SIGTERM, as Docker and systemd send it; returns the exit code."""
+        return stop_process(self.process, self.output, signal.SIGTERM, timeout_s)
+
+
+def stop_process(process: subprocess.Popen[str], output: list[str], signum: int,
+                 timeout_s: float = 10.0) -> int:
+    """Send ``signum``, wait up to ``timeout_s`` (then kill), keep the output; exit code."""
+    if process.poll() is None:
+        process.send_signal(signum)
+    try:
+        out, _ = process.communicate(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        out, _ = process.communicate()
+    output.append(out or "")
+    return process.returncode
 
 
 def start_server(extra_args: Sequence[str] = (), ws_port: int | None = None,

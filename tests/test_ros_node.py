@@ -12,6 +12,7 @@ import itertools
 import os
 import shutil
 import signal
+import statistics
 import subprocess
 import sys
 import time
@@ -61,7 +62,7 @@ from ros_nodes.topics import PUBLISHED_TOPICS  # noqa: E402
 from ros_nodes.virtual_robot import TF_MISSING_WARNING  # noqa: E402
 from ros_nodes.virtual_robot_core import VirtualRobot  # noqa: E402
 
-from server_process import ServerProcess, start_server, wait_for  # noqa: E402
+from server_process import ServerProcess, start_server, stop_process, wait_for  # noqa: E402
 
 HAS_TF2_MSGS = importlib.util.find_spec("tf2_msgs") is not None
 
@@ -167,15 +168,7 @@ class RobotProcess:
 
     def stop(self, timeout_s: float = 10.0) -> int:
         """Ctrl+C, as a terminal or ros2 launch sends it; returns the exit code."""
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGINT)
-        try:
-            out, _ = self.process.communicate(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            out, _ = self.process.communicate()
-        self.output.append(out or "")
-        return self.process.returncode
+        return stop_process(self.process, self.output, signal.SIGINT, timeout_s)
 
 
 def robot_command(*parameters: str) -> list[str]:
@@ -227,8 +220,15 @@ def twist(linear: float = 0.0, angular: float = 0.0) -> Twist:
     return msg
 
 
+def stamp_s(msg: Any) -> float:
+    return float(msg.header.stamp.sec) + msg.header.stamp.nanosec * 1e-9
+
+
 def rate_hz(received: list[tuple[float, Any]]) -> float:
-    return (len(received) - 1) / (received[-1][0] - received[0][0])
+    """The publisher's rate, from its header stamps (the receiver's timing under load, and a
+    lost best-effort message, do not count): one over the median stamp interval."""
+    stamps = sorted(stamp_s(msg) for _, msg in received)
+    return 1.0 / statistics.median(b - a for a, b in itertools.pairwise(stamps))
 
 
 # ---- dicts <-> rclpy messages ------------------------------------------------------------
@@ -351,25 +351,23 @@ def test_cmd_vel_timeout_stops_after_the_timeout(graph: Graph,
 
 
 def _acceleration_mps2(graph: Graph, truth: list[tuple[float, Any]], cmd_vel: Any) -> float:
-    """Command 0.5 m/s from rest; the true acceleration over the ticks before the limit."""
+    """Command 0.5 m/s from rest; the true acceleration while it ramps (sim-time stamps)."""
     graph.call(Empty, "/reset_simulation", Empty.Request())
     start = len(truth)
     cmd_vel.publish(twist(0.5))
     graph.spin_until(lambda: any(m.twist.twist.linear.x >= 0.45 for _, m in truth[start:]),
                      10.0, "speed 0.45 m/s")
     cmd_vel.publish(twist())
-    speeds = [m.twist.twist.linear.x for _, m in truth[start:]]
-    first = next(i for i, v in enumerate(speeds) if v > 0)
-    last = next(i for i, v in enumerate(speeds) if v >= 0.45)
-    if last == first:
-        return speeds[first] / DT_S
-    # /ground_truth is reliable: one message per tick, so the index counts ticks.
-    return (speeds[last] - speeds[first]) / ((last - first) * DT_S)
+    ramp = sorted((stamp_s(m), m.twist.twist.linear.x) for _, m in truth[start:]
+                  if 0.0 < m.twist.twist.linear.x < 0.45)
+    assert len(ramp) >= 2, ramp
+    (t0, v0), (t1, v1) = ramp[0], ramp[-1]
+    return (v1 - v0) / (t1 - t0)
 
 
 def test_mass_parameter_changes_dynamic_motion(graph: Graph,
                                                start_robot: Callable[..., RobotProcess]) -> None:
-    start_robot("mode:=dynamic")
+    start_robot("mode:=dynamic", "use_sim_time:=true")  # exact stamps, whatever the load
     truth = graph.collect(Odometry, "/ground_truth", RELIABLE)
     cmd_vel = graph.node.create_publisher(Twist, "/cmd_vel", 10)
     graph.spin_until(lambda: cmd_vel.get_subscription_count() > 0, 10.0, "/cmd_vel subscriber")

@@ -202,3 +202,12 @@ def _listening(running: ServerProcess) -> bool:
         return True
     except OSError:
         return False
+
+
+def test_missing_page_libraries_are_named_in_the_banner(tmp_path) -> None:
+    running = start_server(["--web-dir", str(tmp_path)])
+    assert running.stop() == 0
+    assert "run: npm ci --prefix web-interface" in "".join(running.output)
+    installed = start_server()
+    installed.stop()
+    assert "npm ci" not in "".join(installed.output)

@@ -97,6 +97,9 @@ async def serve_forever(args: argparse.Namespace, robot: VirtualRobot) -> int:
     if args.host in ("0.0.0.0", "::"):
         print("  listening on every network interface: anyone who can reach this machine can "
               "drive the robot; only the admin token can change its parameters", flush=True)
+    if not (args.web_dir / "node_modules" / "roslib").is_dir():
+        print(f"websim: warning: the page's libraries are not installed in {args.web_dir}; "
+              "run: npm ci --prefix web-interface", flush=True)
     print("websim: ready (Ctrl+C to stop)", flush=True)
 
     await stop.wait()
