@@ -1,8 +1,13 @@
 """websim's simulation core: a differential-drive robot, its LiDAR and its world, on pymunk.
 
 Pure computation: no ROS, network, threads or plotting. Units are SI (m, s, rad, kg, N).
+
+``compare_modes`` is ``physics.compare.compare`` (kinematic vs dynamic on one command list);
+it is not exported as ``compare``, which would hide the ``physics.compare`` module.
 """
 
+from physics.compare import compare as compare_modes
+from physics.compare import load_commands
 from physics.lidar import Lidar
 from physics.params import LidarParams, NoiseParams, PlatformParams, RobotParams, load_params
 from physics.robot import MODES, MobileRobotPhysics
@@ -28,6 +33,8 @@ __all__ = [
     "RobotState",
     "Simulation",
     "World",
+    "compare_modes",
+    "load_commands",
     "load_params",
     "load_world",
 ]

@@ -14,7 +14,10 @@ A command file is a YAML list (or a CSV with these columns) of segments::
 
 ``mass_kg`` and ``inertia_kg_m2`` are optional payload changes made at the segment's start (the
 admin page's perturbation). Both modes run headless with the same seed; with a heading PID the
-segments' ``angular_rps`` is replaced by the controller's output at 10 Hz.
+segments' ``angular_rps`` is replaced by the controller's output at 10 Hz, fed the odometry or
+the true heading, and each mode's summary adds the step responses of both headings
+(``heading``: odometry, ``true_heading``: ground truth relative to spawn), each with its
+``final_error_deg``.
 """
 
 from __future__ import annotations
@@ -42,6 +45,9 @@ from physics.validation import (
 from physics.world import World
 
 MODES_COMPARED = ("kinematic", "dynamic")
+
+HEADING_FEEDBACK = ("odometry", "ground_truth")
+"""What a heading controller can be fed: /odom (the course's node) or the true heading (an IMU)."""
 
 SEGMENT_KEYS = ("duration_s", "linear_mps", "angular_rps", "mass_kg", "inertia_kg_m2")
 
@@ -96,10 +102,18 @@ class HeadingController:
     Attributes:
         gains: the PID's gains; its output limit is clamped to the robot's max_angular_rps.
         setpoint_rad: the heading to hold, in the odom frame (rad).
+        feedback: the heading it measures: ``"odometry"`` (wheel encoders, like ``/odom``) or
+            ``"ground_truth"`` (the true heading relative to spawn, like an IMU).
     """
 
     gains: PidGains
     setpoint_rad: float
+    feedback: str = "odometry"
+
+    def __post_init__(self) -> None:
+        if self.feedback not in HEADING_FEEDBACK:
+            raise ConfigError(f"feedback: must be one of {', '.join(HEADING_FEEDBACK)}, "
+                              f"got {self.feedback!r}")
 
 
 @dataclass(frozen=True)
@@ -180,7 +194,9 @@ def run_mode(world: World, segments: Sequence[Segment], mode: str,
     """Drive ``segments`` through one mode; one row per tick, the first at t = 0."""
     sim = Simulation(world, params, mode=mode, seed=seed, lidar=lidar, noise=noise)
     pid = None
+    feedback = HEADING_FEEDBACK[0]
     if controller is not None:
+        feedback = controller.feedback
         limit = min(controller.gains.output_limit, sim.params.max_angular_rps)
         gains = PidGains(controller.gains.kp, controller.gains.ki, controller.gains.kd, limit)
         pid = HeadingPid(gains, controller.setpoint_rad)
@@ -193,7 +209,9 @@ def run_mode(world: World, segments: Sequence[Segment], mode: str,
         sim.command(segment.linear_mps, angular)
         for _ in range(max(1, round(segment.duration_s / sim.dt_s))):
             if pid is not None and sim.tick % ticks_per_control == 0:
-                angular = pid.update(sim.odometry().theta, ticks_per_control * sim.dt_s)
+                heading = (sim.odometry().theta if feedback == "odometry"
+                           else wrap_angle(sim.ground_truth().theta - world.start.theta))
+                angular = pid.update(heading, ticks_per_control * sim.dt_s)
                 sim.command(segment.linear_mps, angular)
             sim.step()
             rows.append(_row(sim, mode))
@@ -217,7 +235,8 @@ def compare(world: World, segments: Sequence[Segment], params: RobotParams | Non
     runs = {mode: run_mode(world, segments, mode, params, seed=seed, lidar=lidar, noise=noise,
                            controller=controller, on_tick=on_tick)
             for mode in MODES_COMPARED}
-    summary: dict[str, Any] = {mode: _mode_summary(rows, segments, controller)
+    summary: dict[str, Any] = {mode: _mode_summary(rows, segments, controller,
+                                                   world.start.theta)
                                for mode, rows in runs.items()}
     kinematic, dynamic = runs["kinematic"], runs["dynamic"]
     deviations = [math.hypot(a.x - b.x, a.y - b.y) for a, b in
@@ -234,7 +253,7 @@ def compare(world: World, segments: Sequence[Segment], params: RobotParams | Non
 
 
 def _mode_summary(rows: list[TrajectoryRow], segments: Sequence[Segment],
-                  controller: HeadingController | None) -> dict[str, Any]:
+                  controller: HeadingController | None, spawn_theta: float) -> dict[str, Any]:
     final = rows[-1]
     distance = sum(math.hypot(b.x - a.x, b.y - a.y) for a, b in itertools.pairwise(rows))
     steps = []
@@ -258,8 +277,14 @@ def _mode_summary(rows: list[TrajectoryRow], segments: Sequence[Segment],
     }
     if controller is not None:
         times = [r.t_s for r in rows]
-        summary["heading"] = step_response(times, [r.odom_theta for r in rows],
-                                           controller.setpoint_rad)
+        odometry = [r.odom_theta for r in rows]
+        truth = [wrap_angle(r.theta - spawn_theta) for r in rows]
+        for key, headings in (("heading", odometry), ("true_heading", truth)):
+            summary[key] = {
+                **step_response(times, headings, controller.setpoint_rad),
+                "final_error_deg": math.degrees(wrap_angle(headings[-1]
+                                                           - controller.setpoint_rad)),
+            }
     return summary
 
 

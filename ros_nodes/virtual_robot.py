@@ -51,6 +51,7 @@ except ImportError as error:  # pragma: no cover - depends on the installation
 from physics import ConfigError, NoiseParams, Simulation, load_params, load_world
 from physics.params import SHIPPED_PARAMS_FILE
 from ros_nodes.messages import stamp
+from ros_nodes.node_parameters import add_parameter_callbacks
 from ros_nodes.parameters import PARAMETER_DOUBLE, PARAMETERS
 from ros_nodes.ros_interop import (
     MessageConversionError,
@@ -153,12 +154,8 @@ class VirtualRobotNode(Node):
         self._access: RobotAccess = access or DirectAccess()
         self._ticks = 0
         self._robot: VirtualRobot | None = None
-        if hasattr(self, "add_post_set_parameters_callback"):  # Iron and later
-            self.add_pre_set_parameters_callback(self._coerce_parameters)
-            self.add_on_set_parameters_callback(self._validate_parameters)
-            self.add_post_set_parameters_callback(self._apply_parameters)
-        else:  # Humble has only the one callback: validate, then apply there
-            self.add_on_set_parameters_callback(self._validate_and_apply_parameters)
+        add_parameter_callbacks(self, _DOUBLE_PARAMETERS, self._validate_parameters,
+                                self._apply_parameters)
 
         self._use_sim_time = bool(self.get_parameter("use_sim_time").value)
         self.robot = robot if robot is not None else self._build_robot()
@@ -258,12 +255,6 @@ class VirtualRobotNode(Node):
 
     # ---- parameters -----------------------------------------------------------------------
 
-    def _coerce_parameters(self, parameters: list[Parameter[Any]]) -> list[Parameter[Any]]:
-        """Integers for double parameters become doubles (``ros2 param set ... mass_kg 2``)."""
-        return [Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
-                if p.name in _DOUBLE_PARAMETERS and p.type_ == Parameter.Type.INTEGER else p
-                for p in parameters]
-
     def _validate_parameters(self, parameters: list[Parameter[Any]]) -> SetParametersResult:
         """Refuse bad values with the reason (also for overrides given at start)."""
         robot_values = {p.name: p.value for p in parameters if p.name in _ROBOT_PARAMETERS}
@@ -301,13 +292,6 @@ class VirtualRobotNode(Node):
             self._access.call(apply)
         except (ConfigError, TimeoutError) as error:
             self.get_logger().error(f"parameters {sorted(values)} not applied: {error}")
-
-    def _validate_and_apply_parameters(self, parameters: list[Parameter[Any]]
-                                       ) -> SetParametersResult:
-        result = self._validate_parameters(parameters)
-        if result.successful:
-            self._apply_parameters(parameters)
-        return result
 
     def _on_robot_parameters_changed(self, names: list[str]) -> None:
         """A change made elsewhere (the admin page): mirror it into the node's parameters."""

@@ -7,6 +7,8 @@ import pytest
 from physics import RobotParams, Simulation, World, load_world
 from physics.world import WORLDS_DIR, world_from_dict
 
+pytest.register_assert_rewrite("ros_fixtures")  # a plugin the ROS test modules import first
+
 SHIPPED_WORLDS = sorted(path.stem for path in WORLDS_DIR.glob("*.yaml"))
 
 ARENA_HALF_M = 3.0

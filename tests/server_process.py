@@ -24,8 +24,11 @@ def free_port() -> int:
 
 
 def wait_for(condition: Callable[[], Any], timeout_s: float = 10.0, what: str = "condition",
-             interval_s: float = 0.02) -> Any:
-    """Poll ``condition`` until it returns something truthy; fail after ``timeout_s``."""
+             interval_s: float = 0.02, pause: Callable[[], Any] | None = None) -> Any:
+    """Poll ``condition`` until it returns something truthy; fail after ``timeout_s``.
+
+    Between polls it sleeps ``interval_s``, or calls ``pause`` (spinning an executor, say).
+    """
     deadline = time.monotonic() + timeout_s
     while True:
         result = condition()
@@ -33,7 +36,10 @@ def wait_for(condition: Callable[[], Any], timeout_s: float = 10.0, what: str = 
             return result
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(interval_s)
+        if pause is None:
+            time.sleep(interval_s)
+        else:
+            pause()
 
 
 @dataclass

@@ -9,15 +9,9 @@ from __future__ import annotations
 
 import importlib.util
 import itertools
-import os
-import shutil
-import signal
 import statistics
 import subprocess
-import sys
-import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -26,23 +20,19 @@ import pytest
 rclpy = pytest.importorskip("rclpy", reason="rclpy not installed (pip install .[ros])")
 # rosidl's parser imports lark, which imports deprecated modules; not ours to fix.
 pytestmark = pytest.mark.filterwarnings("ignore:module 'sre_:DeprecationWarning")
+pytest_plugins = ("ros_fixtures",)
+"""Fixtures domain, graph, test_world, start_robot."""
 
 import roslibpy  # noqa: E402
 from geometry_msgs.msg import Twist  # noqa: E402
 from nav_msgs.msg import Odometry  # noqa: E402
 from rcl_interfaces.msg import ParameterType  # noqa: E402
-from rcl_interfaces.srv import GetParameters, SetParameters  # noqa: E402
-from rclpy.context import Context  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.node import Node  # noqa: E402
-from rclpy.parameter import Parameter, parameter_value_to_python  # noqa: E402
 from rclpy.qos import (  # noqa: E402
     DurabilityPolicy,
     QoSProfile,
     ReliabilityPolicy,
     qos_profile_sensor_data,
 )
-from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
@@ -62,166 +52,26 @@ from ros_nodes.topics import PUBLISHED_TOPICS  # noqa: E402
 from ros_nodes.virtual_robot import TF_MISSING_WARNING  # noqa: E402
 from ros_nodes.virtual_robot_core import VirtualRobot  # noqa: E402
 
-from server_process import ServerProcess, start_server, stop_process, wait_for  # noqa: E402
+from ros_fixtures import (  # noqa: E402
+    DT_S,
+    LATCHED,
+    RELIABLE,
+    STARTUP_TIMEOUT_S,
+    WALL_X_M,
+    Graph,
+    RobotProcess,
+    robot_command,
+    stamp_s,
+)
+from server_process import ServerProcess, start_server, wait_for  # noqa: E402
 
 HAS_TF2_MSGS = importlib.util.find_spec("tf2_msgs") is not None
-
-WALL_X_M = 2.0
-"""The test world's one wall: x = 2 m, so beam 0 (straight ahead at spawn) reads 2 m."""
-
-TEST_WORLD = f"""\
-name: ros-test
-walls:
-  - [{WALL_X_M}, -2.0, {WALL_X_M}, 2.0]
-"""
-
-RELIABLE = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
-DT_S = 0.05
-STARTUP_TIMEOUT_S = 30.0
-
-
-@pytest.fixture(scope="session")
-def domain_ids() -> Iterator[int]:
-    """ROS_DOMAIN_IDs 1..100, distinct within the session, offset by the process id."""
-    start = os.getpid() % 100
-    return ((start + n) % 100 + 1 for n in itertools.count())
-
-
-@pytest.fixture
-def domain(domain_ids: Iterator[int], monkeypatch: pytest.MonkeyPatch) -> int:
-    """This test's domain, set in the environment that this process and its children use."""
-    domain_id = next(domain_ids)
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.setenv("ROS_LOCALHOST_ONLY", "1")
-    return domain_id
-
-
-class Graph:
-    """This test's own rclpy node, spun on the test thread while waiting."""
-
-    def __init__(self, domain_id: int) -> None:
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain_id,
-                   signal_handler_options=SignalHandlerOptions.NO)
-        self.node = Node("websim_test", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-
-    def spin_until(self, condition: Callable[[], Any], timeout_s: float = 10.0,
-                   what: str = "condition") -> Any:
-        deadline = time.monotonic() + timeout_s
-        while True:
-            result = condition()
-            if result:
-                return result
-            if time.monotonic() > deadline:
-                raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-            self.executor.spin_once(timeout_sec=0.02)
-
-    def collect(self, msg_type: Any, topic: str, qos: QoSProfile) -> list[tuple[float, Any]]:
-        """Subscribe; the list fills with (receive time, message) while spinning."""
-        received: list[tuple[float, Any]] = []
-        self.node.create_subscription(msg_type, topic,
-                                      lambda msg: received.append((time.monotonic(), msg)), qos)
-        return received
-
-    def call(self, srv_type: Any, name: str, request: Any, timeout_s: float = 10.0) -> Any:
-        client = self.node.create_client(srv_type, name)
-        self.spin_until(client.service_is_ready, timeout_s, f"service {name}")
-        future = client.call_async(request)
-        self.spin_until(future.done, timeout_s, f"answer from {name}")
-        self.node.destroy_client(client)
-        return future.result()
-
-    def set_parameters(self, **values: Any) -> list[Any]:
-        request = SetParameters.Request(parameters=[
-            Parameter(name, value=value).to_parameter_msg() for name, value in values.items()])
-        return list(self.call(SetParameters, "/virtual_robot/set_parameters", request).results)
-
-    def get_parameter(self, name: str) -> Any:
-        response = self.call(GetParameters, "/virtual_robot/get_parameters",
-                             GetParameters.Request(names=[name]))
-        return parameter_value_to_python(response.values[0])
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.context.try_shutdown()
-
-
-@pytest.fixture
-def graph(domain: int) -> Iterator[Graph]:
-    running = Graph(domain)
-    yield running
-    running.close()
-
-
-@dataclass
-class RobotProcess:
-    """A running ``websim-robot``."""
-
-    process: subprocess.Popen[str]
-    output: list[str] = field(default_factory=list)
-
-    def stop(self, timeout_s: float = 10.0) -> int:
-        """Ctrl+C, as a terminal or ros2 launch sends it; returns the exit code."""
-        return stop_process(self.process, self.output, signal.SIGINT, timeout_s)
-
-
-def robot_command(*parameters: str) -> list[str]:
-    """``websim-robot --ros-args -p ...`` (the module if the script is not on PATH)."""
-    script = shutil.which("websim-robot")
-    base = [script] if script else [sys.executable, "-m", "ros_nodes.virtual_robot"]
-    args = [arg for parameter in parameters for arg in ("-p", parameter)]
-    return [*base, "--ros-args", *args] if args else base
-
-
-@pytest.fixture
-def test_world(tmp_path: Path) -> Path:
-    path = tmp_path / "ros_test.yaml"
-    path.write_text(TEST_WORLD)
-    return path
-
-
-@pytest.fixture
-def start_robot(graph: Graph, test_world: Path) -> Iterator[Callable[..., RobotProcess]]:
-    """Start ``websim-robot`` on the test world and wait until it publishes /odom."""
-    started: list[RobotProcess] = []
-
-    def start(*parameters: str) -> RobotProcess:
-        command = robot_command(f"world:={test_world}", *parameters)
-        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                   text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
-        robot = RobotProcess(process)
-        started.append(robot)
-
-        def publishing() -> bool:
-            if process.poll() is not None:
-                out, _ = process.communicate()
-                raise AssertionError(f"websim-robot exited with {process.returncode}:\n{out}")
-            return graph.node.count_publishers("/odom") > 0
-
-        graph.spin_until(publishing, STARTUP_TIMEOUT_S, "websim-robot to publish /odom")
-        return robot
-
-    yield start
-    for robot in started:
-        code = robot.stop()
-        assert code == 0, f"websim-robot exited with {code}:\n{''.join(robot.output)}"
-
 
 def twist(linear: float = 0.0, angular: float = 0.0) -> Twist:
     msg = Twist()
     msg.linear.x = float(linear)
     msg.angular.z = float(angular)
     return msg
-
-
-def stamp_s(msg: Any) -> float:
-    return float(msg.header.stamp.sec) + msg.header.stamp.nanosec * 1e-9
 
 
 def rate_hz(received: list[tuple[float, Any]]) -> float:

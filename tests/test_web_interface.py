@@ -33,6 +33,7 @@ import pytest
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
+from chromium import launched_chromium, skip_reason
 from server_process import ADMIN_TOKEN, ServerProcess, free_port, start_server, wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -41,10 +42,6 @@ NODE_TESTS = sorted((Path(__file__).parent / "web").glob("*.test.mjs"))
 ARTIFACTS = ROOT / "test-artifacts"
 DOCS_SCREENSHOT = ROOT / "docs" / "screenshot.png"
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run",
-                 "--disable-quic"]
 LOCAL_HOSTS = {"127.0.0.1", "localhost"}
 
 NODE = shutil.which("node")
@@ -60,20 +57,7 @@ SPEED_MPS = 0.3
 DEG = math.pi / 180
 
 
-def _browser_skip_reason() -> str | None:
-    if not Path(CHROMIUM).exists():
-        return "chromium not installed"
-    try:
-        import playwright.sync_api  # noqa: F401
-    except ImportError:
-        return "playwright not installed (pip install -e '.[test]')"
-    missing = [str(p.relative_to(ROOT)) for p in LIBRARIES if not p.exists()]
-    if missing:
-        return f"{', '.join(missing)} missing: run npm ci in web-interface/"
-    return None
-
-
-BROWSER_SKIP = _browser_skip_reason()
+BROWSER_SKIP = skip_reason(LIBRARIES)
 needs_browser = pytest.mark.skipif(BROWSER_SKIP is not None, reason=BROWSER_SKIP or "")
 
 
@@ -194,13 +178,8 @@ def twist_pairs(messages: list[dict[str, Any]]) -> list[tuple[float, float]]:
 @pytest.fixture(scope="module")
 def browser() -> Iterator[Any]:
     """Debian's chromium under Playwright; each launch gets a fresh temporary profile."""
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        launched = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS,
-                                              headless=True)
+    with launched_chromium() as launched:
         yield launched
-        launched.close()
 
 
 @dataclass

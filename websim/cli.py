@@ -10,6 +10,7 @@ from physics import MODES, ConfigError, Simulation, load_params, load_world
 from physics.params import SHIPPED_PARAMS_FILE
 from physics.world import WORLDS_DIR
 from ros_nodes.virtual_robot_core import VirtualRobot
+from websim import compare_command
 from websim import serve as serve_command
 
 DEFAULT_WORLD = str(WORLDS_DIR / "empty.yaml")
@@ -38,14 +39,23 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sim_arguments(serve)
     serve_command.add_arguments(serve)
     serve.set_defaults(run=_run_serve)
+
+    compare = commands.add_parser(
+        "compare", help="run a command file in kinematic and dynamic mode and compare them",
+        description="Drive a command file headless through both motion models with the same "
+                    "seed; write trajectory.csv, summary.json and comparison.png to --out.")
+    _add_sim_arguments(compare, mode=False)
+    compare_command.add_arguments(compare)
+    compare.set_defaults(run=compare_command.run)
     return parser
 
 
-def _add_sim_arguments(parser: argparse.ArgumentParser) -> None:
+def _add_sim_arguments(parser: argparse.ArgumentParser, *, mode: bool = True) -> None:
     parser.add_argument("--world", default=DEFAULT_WORLD,
                         help="world file, or a shipped world's name (default: empty)")
-    parser.add_argument("--mode", choices=MODES, default="kinematic",
-                        help="motion model (default: kinematic)")
+    if mode:
+        parser.add_argument("--mode", choices=MODES, default="kinematic",
+                            help="motion model (default: kinematic)")
     parser.add_argument("--params", default=str(SHIPPED_PARAMS_FILE),
                         help="robot parameter file (default: config/pi4b_params.yaml)")
     parser.add_argument("--seed", type=int, default=0, help="random seed for noise (default 0)")

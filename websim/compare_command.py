@@ -1,0 +1,325 @@
+"""``websim compare``: one command file through both motion models, written to a directory.
+
+Writes ``trajectory.csv`` (one row per tick and mode, columns ``TRAJECTORY_COLUMNS``),
+``summary.json`` (``physics.compare.compare``'s summary) and, if matplotlib is installed,
+``comparison.png`` (paths over the world's walls, v(t) and omega(t) commanded and measured).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import json
+import math
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import IO, Any
+
+from physics import TICK_PERIOD_S, ConfigError, RobotParams, World, load_params, load_world
+from physics.compare import (
+    HEADING_FEEDBACK,
+    MODES_COMPARED,
+    TRAJECTORY_COLUMNS,
+    Comparison,
+    HeadingController,
+    Segment,
+    compare,
+    load_commands,
+)
+from physics.pid import PidGains
+from physics.validation import check_keys
+
+PLOTS_HINT = ("pip install 'websim[plots]' (in a checkout: pip install -e '.[plots]')")
+"""How to get matplotlib, the optional dependency of ``comparison.png``."""
+
+PROGRESS_DELAY_S = 1.0
+"""Wall time before the progress bar appears: a short run prints nothing."""
+
+PROGRESS_REDRAW_S = 0.1
+"""Shortest wall time between two redraws of the progress bar on a terminal."""
+
+MODE_STYLES = {"kinematic": ("tab:blue", "-"), "dynamic": ("tab:orange", "-")}
+"""Line colour and style of each mode in the figure."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``websim compare`` (besides world, params and seed)."""
+    parser.add_argument("--commands", required=True,
+                        help="command file: a YAML list (or CSV) of segments with duration_s, "
+                             "linear_mps, angular_rps and optional mass_kg, inertia_kg_m2")
+    parser.add_argument("--out", required=True, type=Path,
+                        help="directory for trajectory.csv, summary.json, comparison.png")
+    parser.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="NAME=VALUE",
+                        help="override a robot parameter, e.g. --set mass_kg=2.4 (repeatable)")
+    control = parser.add_argument_group("heading controller (replaces angular_rps)")
+    control.add_argument("--controller", choices=["pid"], default=None,
+                         help="drive angular.z with the course's 10 Hz heading PID")
+    defaults = PidGains()
+    control.add_argument("--setpoint-deg", type=float, default=None,
+                         help="heading to hold, odom frame (degrees; default 90)")
+    control.add_argument("--kp", type=float, default=None, help=f"default {defaults.kp}")
+    control.add_argument("--ki", type=float, default=None, help=f"default {defaults.ki}")
+    control.add_argument("--kd", type=float, default=None, help=f"default {defaults.kd}")
+    control.add_argument("--feedback", choices=HEADING_FEEDBACK, default=None,
+                         help="heading the PID measures: odometry (/odom, default) or "
+                              "ground_truth (the true heading, like an IMU)")
+
+
+def robot_with_overrides(robot: RobotParams, overrides: Sequence[str]) -> RobotParams:
+    """``robot`` with ``NAME=VALUE`` overrides applied and validated.
+
+    Raises:
+        ConfigError: a malformed override, an unknown name (with a "did you mean" hint) or a
+            value ``RobotParams`` refuses; the message starts with ``--set``.
+    """
+    names = [item.name for item in dataclasses.fields(RobotParams)]
+    values: dict[str, float] = {}
+    for override in overrides:
+        name, equals, text = override.partition("=")
+        name = name.strip()
+        if not equals or not name:
+            raise ConfigError(f"--set {override!r}: expected NAME=VALUE, e.g. mass_kg=2.4")
+        check_keys("--set", {name: text}, names)
+        try:
+            values[name] = float(text)
+        except ValueError:
+            raise ConfigError(f"--set {name}: expected a number, got {text!r}") from None
+    try:
+        return dataclasses.replace(robot, **values)
+    except ConfigError as error:
+        raise ConfigError(f"--set {error}") from None
+
+
+def heading_controller(args: argparse.Namespace) -> HeadingController | None:
+    """The heading PID the arguments ask for, or None."""
+    tuning = {"--setpoint-deg": args.setpoint_deg, "--kp": args.kp, "--ki": args.ki,
+              "--kd": args.kd, "--feedback": args.feedback}
+    if args.controller is None:
+        given = [flag for flag, value in tuning.items() if value is not None]
+        if given:
+            raise ConfigError(f"{given[0]} needs --controller pid")
+        return None
+    defaults = PidGains()
+    gains = PidGains(kp=defaults.kp if args.kp is None else args.kp,
+                     ki=defaults.ki if args.ki is None else args.ki,
+                     kd=defaults.kd if args.kd is None else args.kd)
+    setpoint_deg = 90.0 if args.setpoint_deg is None else args.setpoint_deg
+    return HeadingController(gains, math.radians(setpoint_deg),
+                             args.feedback or HEADING_FEEDBACK[0])
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the comparison and write its files; returns the exit code.
+
+    Raises:
+        ConfigError: a bad command, world or parameter file, override or output directory.
+    """
+    segments = load_commands(args.commands)
+    world = load_world(args.world)
+    platform = load_params(args.params)
+    robot = robot_with_overrides(platform.robot, args.overrides)
+    controller = heading_controller(args)
+    out: Path = args.out
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise ConfigError(f"{out}: cannot create output directory: {error.strerror}") from None
+
+    progress = Progress(len(MODES_COMPARED) * total_ticks(segments), sys.stderr)
+    result = compare(world, segments, robot, seed=args.seed, lidar=platform.lidar,
+                     noise=platform.noise, controller=controller, on_tick=progress.tick)
+    progress.close()
+
+    written = [write_trajectory(result, out / "trajectory.csv"),
+               write_summary(result, out / "summary.json")]
+    try:
+        written.append(write_figure(result, world, segments, out / "comparison.png"))
+    except ImportError:
+        print(f"websim: comparison.png skipped, matplotlib is not installed: {PLOTS_HINT}",
+              file=sys.stderr)
+    difference = result.summary["difference"]
+    print(f"wrote {', '.join(str(path) for path in written)}")
+    print(f"dynamic vs kinematic: final position {difference['final_position_m']:.4f} m apart, "
+          f"max path deviation {difference['max_path_deviation_m']:.4f} m "
+          f"at t = {difference['max_path_deviation_at_s']:.2f} s")
+    return 0
+
+
+def total_ticks(segments: Sequence[Segment]) -> int:
+    """Ticks ``physics.compare.run_mode`` takes for ``segments`` in one mode."""
+    return sum(max(1, round(segment.duration_s / TICK_PERIOD_S)) for segment in segments)
+
+
+class Progress:
+    """A progress bar on ``stream`` that appears only once a run has taken ``delay_s``.
+
+    On a terminal it redraws one line in place; elsewhere (a log file, CI) it prints a line
+    at every quarter, so logs stay readable. Twenty lines of code instead of a tqdm dependency.
+    """
+
+    def __init__(self, total: int, stream: IO[str], *, delay_s: float = PROGRESS_DELAY_S,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.total = max(1, total)
+        self.stream = stream
+        self.delay_s = delay_s
+        self.clock = clock
+        self.done = 0
+        self.started = clock()
+        self.last_drawn: float | None = None
+        self.last_quarter = 0
+        self.terminal = stream.isatty()
+
+    def tick(self) -> None:
+        """Count one tick; draw if the run is long enough and a redraw is due."""
+        self.done += 1
+        now = self.clock()
+        if now - self.started < self.delay_s:
+            return
+        if self.terminal:
+            if self.last_drawn is None or now - self.last_drawn >= PROGRESS_REDRAW_S \
+                    or self.done == self.total:
+                self._draw("\r", "")
+                self.last_drawn = now
+        elif 4 * self.done // self.total > self.last_quarter:
+            self.last_quarter = 4 * self.done // self.total
+            self._draw("", "\n")
+            self.last_drawn = now
+
+    def close(self) -> None:
+        """End the bar's line, if one was drawn."""
+        if self.last_drawn is not None and self.terminal:
+            self.stream.write("\n")
+            self.stream.flush()
+
+    def _draw(self, start: str, end: str) -> None:
+        width = 30
+        filled = width * self.done // self.total
+        self.stream.write(f"{start}simulating [{'#' * filled}{'.' * (width - filled)}] "
+                          f"{100 * self.done // self.total:3d} % "
+                          f"({self.clock() - self.started:.1f} s){end}")
+        self.stream.flush()
+
+
+def write_trajectory(result: Comparison, path: Path) -> Path:
+    """Write every row, ground truth and odometry, one per tick and mode."""
+    with _opened(path) as stream:
+        writer = csv.writer(stream, lineterminator="\n")
+        writer.writerow(TRAJECTORY_COLUMNS)
+        writer.writerows(result.rows)
+    return path
+
+
+def write_summary(result: Comparison, path: Path) -> Path:
+    """Write ``result.summary`` as indented JSON."""
+    with _opened(path) as stream:
+        json.dump(result.summary, stream, indent=2)
+        stream.write("\n")
+    return path
+
+
+def _opened(path: Path) -> IO[str]:
+    try:
+        return path.open("w", encoding="utf-8", newline="")
+    except OSError as error:
+        raise ConfigError(f"{path}: cannot write: {error.strerror}") from None
+
+
+def write_figure(result: Comparison, world: World, segments: Sequence[Segment],
+                 path: Path) -> Path:
+    """Draw the paths over the walls and the velocity responses to ``path`` (PNG).
+
+    Raises:
+        ImportError: matplotlib is not installed.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle
+
+    figure = Figure(figsize=(12, 6.5), dpi=100, layout="constrained")
+    FigureCanvasAgg(figure)
+    grid = figure.add_gridspec(2, 2, width_ratios=(1.0, 1.25))
+    paths = figure.add_subplot(grid[:, 0])
+    linear = figure.add_subplot(grid[0, 1])
+    angular = figure.add_subplot(grid[1, 1], sharex=linear)
+
+    for wall in world.walls:
+        paths.plot([wall.x1, wall.x2], [wall.y1, wall.y2], color="0.25", linewidth=2.5,
+                   solid_capstyle="round")
+    for circle in world.circles:
+        paths.add_patch(Circle((circle.x, circle.y), circle.radius_m, color="0.55"))
+    xs: list[float] = []
+    ys: list[float] = []
+    for mode in MODES_COMPARED:
+        rows = result.mode_rows(mode)
+        colour, style = MODE_STYLES[mode]
+        paths.plot([r.x for r in rows], [r.y for r in rows], color=colour, linestyle=style,
+                   linewidth=2, label=f"{mode} (true path)")
+        paths.plot(rows[-1].x, rows[-1].y, marker="o", color=colour)
+        xs += [r.x for r in rows]
+        ys += [r.y for r in rows]
+    dynamic = result.mode_rows("dynamic")
+    start = world.start
+    cos, sin = math.cos(start.theta), math.sin(start.theta)
+    paths.plot([start.x + r.odom_x * cos - r.odom_y * sin for r in dynamic],
+               [start.y + r.odom_x * sin + r.odom_y * cos for r in dynamic],
+               color=MODE_STYLES["dynamic"][0], linestyle=":", linewidth=1.5,
+               label="dynamic (odometry)")
+    paths.plot(start.x, start.y, marker="s", color="black", label="start")
+    _zoom(paths, xs, ys)
+    paths.set_aspect("equal", adjustable="box")
+    paths.set(xlabel="x (m, map frame)", ylabel="y (m)", title=f"Paths in {world.name}")
+    paths.grid(alpha=0.3)
+    paths.legend(loc="best", fontsize=9)
+
+    for axes, column, label in ((linear, "v", "v (m/s)"), (angular, "omega", "ω (rad/s)")):
+        kinematic = result.mode_rows("kinematic")
+        own_commands = any(r.cmd_omega != k.cmd_omega
+                           for r, k in zip(dynamic, kinematic, strict=True))  # a PID's
+        axes.step([r.t_s for r in kinematic], [getattr(r, f"cmd_{column}") for r in kinematic],
+                  where="pre", color="black", linestyle="--", linewidth=1.2,
+                  label="commanded (kinematic)" if own_commands else "commanded")
+        if own_commands:
+            axes.step([r.t_s for r in dynamic], [getattr(r, f"cmd_{column}") for r in dynamic],
+                      where="pre", color="0.5", linestyle="--", linewidth=1.2,
+                      label="commanded (dynamic)")
+        for mode in MODES_COMPARED:
+            rows = result.mode_rows(mode)
+            colour, style = MODE_STYLES[mode]
+            axes.plot([r.t_s for r in rows], [getattr(r, column) for r in rows], color=colour,
+                      linestyle=style, linewidth=1.8, label=mode)
+        _mark_segments(axes, segments)
+        axes.set_ylabel(label)
+        axes.grid(alpha=0.3)
+        axes.legend(loc="best", fontsize=9)
+    linear.set_title("Velocity response: commanded vs each mode (true velocity)")
+    angular.set_xlabel("t (s)")
+    figure.savefig(path, format="png")
+    return path
+
+
+def _zoom(axes: Any, xs: Sequence[float], ys: Sequence[float]) -> None:
+    """Frame the paths with a margin; walls out of view are clipped."""
+    margin_m = 0.3
+    span = max(max(xs) - min(xs), max(ys) - min(ys), 1.0)
+    cx, cy = (max(xs) + min(xs)) / 2, (max(ys) + min(ys)) / 2
+    half = span / 2 + margin_m
+    axes.set_xlim(cx - half, cx + half)
+    axes.set_ylim(cy - half, cy + half)
+
+
+def _mark_segments(axes: Any, segments: Sequence[Segment]) -> None:
+    """Thin vertical lines at segment starts; payload changes labelled."""
+    t = 0.0
+    for segment in segments:
+        if t > 0.0:
+            axes.axvline(t, color="0.8", linewidth=0.8, zorder=0)
+        if segment.mass_kg is not None or segment.inertia_kg_m2 is not None:
+            axes.axvline(t, color="tab:red", linewidth=1.0, zorder=0)
+            axes.annotate("payload", (t, 1.0), xycoords=("data", "axes fraction"),
+                          xytext=(3, -12), textcoords="offset points", color="tab:red",
+                          fontsize=8)
+        t += max(1, round(segment.duration_s / TICK_PERIOD_S)) * TICK_PERIOD_S
