@@ -16,8 +16,11 @@ import numpy as np
 import pytest
 
 from physics import LidarParams, Simulation, load_world
+from ros_nodes import access
 from ros_nodes.parameters import PARAMETER_DOUBLE, PARAMETER_STRING
 from ros_nodes.rosbridge.bridge import Bridge, Session
+from ros_nodes.rosbridge.encoding import MAX_NESTING
+from ros_nodes.rosbridge.limits import OriginPolicy, RateLimit
 from ros_nodes.rosbridge.outbox import Outbox
 from ros_nodes.rosbridge.schema import OP_FIELDS
 from ros_nodes.rosbridge.services import add_robot_services
@@ -247,6 +250,13 @@ def test_publishing_a_simulator_topic_is_refused(rig: Rig) -> None:
     assert rig.drain(watcher) == []
 
 
+def _nested(depth: int) -> Any:
+    value: Any = 0.1
+    for _ in range(depth):
+        value = {"x": value}
+    return value
+
+
 BAD_FRAMES = [
     "{not json", "[1, 2, 3]", '"text"', "{}", json.dumps({"op": "fly"}),
     json.dumps({"op": "subscribe"}), json.dumps({"op": "subscribe", "topic": 5}),
@@ -264,6 +274,12 @@ BAD_FRAMES = [
     json.dumps({"op": "service_response", "service": "/x", "id": "nope", "result": True}),
     json.dumps({"op": "set_level", "level": "loud"}),
     b"\x00\x01binary",
+    "[" * 100_000 + "]" * 100_000,  # json.loads alone raises RecursionError
+    json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": {"linear": _nested(65)}}),
+    json.dumps({"op": "subscribe", "topic": "/odom; rm -rf"}),
+    json.dumps({"op": "advertise", "topic": "/rosout", "type": "rcl_interfaces/msg/Log"}),
+    json.dumps({"op": "advertise_service", "service": "/rosapi/topics",
+                "type": "rosapi_msgs/srv/Topics"}),
 ]
 
 
@@ -468,3 +484,91 @@ def test_throttle_never_sends_closer_than_the_rate_less_jitter(rig: Rig) -> None
     gaps = [b - a for a, b in itertools.pairwise(sent_at)]
     assert min(gaps) >= 0.195
     assert len(sent_at) == 15, "5 Hz over 3 s despite the jitter"
+
+
+def test_deep_nesting_is_a_protocol_error_naming_the_limit(rig: Rig) -> None:
+    client = rig.client()
+    rig.send(client, {"op": "set_level", "level": "error"})
+    rig.send(client, "[" * 100_000 + "]" * 100_000)
+    rig.send(client, json.dumps({"op": "publish", "topic": "/cmd_vel",
+                                 "msg": {"linear": _nested(MAX_NESTING - 2)}}))
+    messages = [status["msg"] for status in rig.drain(client)]
+    assert messages[0] == f"invalid JSON: too deeply nested (more than {MAX_NESTING} levels)"
+    assert "too deeply" not in messages[1], "within the limit, the frame is parsed"
+
+
+def test_huge_array_is_relayed_within_the_bounded_queue(rig: Rig) -> None:
+    sender, reader = rig.client(), rig.client()
+    rig.send(sender, {"op": "advertise", "topic": "/big", "type": "std_msgs/Float32MultiArray"})
+    rig.send(reader, {"op": "subscribe", "topic": "/big"})
+    for _ in range(20):
+        rig.send(sender, {"op": "publish", "topic": "/big", "msg": {"data": [1.5] * 100_000}})
+    assert len(reader.outbox) == 1, "a reader that does not read keeps only the newest"
+    assert len(rig.drain(reader)[0]["msg"]["data"]) == 100_000
+    rig.tick(3)
+    assert all(math.isfinite(v) for v in rig.robot.sim.ground_truth())
+
+
+def test_students_publish_cmd_vel_and_their_own_topics_and_subscribe_to_any(rig: Rig) -> None:
+    client, other = rig.client(), rig.client()
+    rig.send(client, {"op": "set_level", "level": "error"})
+    rig.send(other, {"op": "subscribe", "topic": "/chat"})
+    rig.send(client, {"op": "advertise", "topic": "/chat", "type": "std_msgs/String"})
+    rig.send(client, {"op": "publish", "topic": "/chat", "msg": {"data": "hi"}})
+    rig.send(client, {"op": "publish", "topic": "/cmd_vel",
+                      "msg": {"linear": {"x": 0.1}, "angular": {"z": 0.0}}})
+    rig.send(client, {"op": "subscribe", "topic": "not_yet_published"})
+    assert rig.drain(client) == []
+    assert [m["msg"] for m in rig.drain(other)] == [{"data": "hi"}]
+    assert rig.robot.sim.last_command == (0.1, 0.0)
+
+
+def test_access_denial_of_a_service_call_is_a_failed_response(rig: Rig) -> None:
+    client = rig.client()
+    reply = rig.call(client, "/bad name!")
+    assert reply["result"] is False and "not a ROS name" in reply["values"]
+
+
+def test_one_client_cannot_grow_the_tables_without_bound(rig: Rig) -> None:
+    client = rig.client()
+    rig.send(client, {"op": "set_level", "level": "error"})
+    for index in range(access.MAX_SUBSCRIPTIONS + 5):
+        rig.send(client, {"op": "subscribe", "topic": f"/t{index}"})
+    rig.send(client, {"op": "subscribe", "topic": "/t0", "id": "again"})
+    assert len(client.subscriptions) == access.MAX_SUBSCRIPTIONS
+    statuses = rig.drain(client)
+    assert len(statuses) == 5
+    assert all(f"at most {access.MAX_SUBSCRIPTIONS} subscriptions" in s["msg"]
+               for s in statuses)
+
+
+def test_rate_limit_is_a_token_bucket_counting_big_frames_more() -> None:
+    clock = Clock()
+    limit = RateLimit(200, clock=clock)
+    assert all(limit.allow() for _ in range(200)), "a burst of one second's worth passes"
+    assert not limit.allow()
+    clock.now_s += 0.25
+    assert sum(limit.allow() for _ in range(80)) == 50, "refills at 200/s"
+    clock.now_s += 10.0
+    assert limit.allow(1 << 20) and limit.allow(1 << 20) and limit.allow(1 << 20)
+    assert not limit.allow(1 << 20), "1 MiB counts as 64 messages"
+    assert limit.reason() == "rate limit: more than 200 messages/s"
+    with pytest.raises(ValueError):
+        RateLimit(0)
+
+
+def test_origin_policy_admits_its_own_pages_local_pages_and_clients_without_origin() -> None:
+    local = OriginPolicy.default("127.0.0.1", 8080)
+    assert local.allows(None)
+    assert local.allows("http://localhost:8080") and local.allows("http://127.0.0.1:8080/")
+    assert local.allows("http://localhost:8000"), "a student's page from python -m http.server"
+    assert local.allows("http://[::1]:3000")
+    assert not local.allows("http://localhost.evil.example:8080")
+    assert not local.allows("null"), "sandboxed frames and file:// pages send null"
+    assert not local.allows("https://evil.example", "127.0.0.1:9090")
+    classroom = OriginPolicy.default("0.0.0.0", 8080, ["https://robot.example"])
+    assert classroom.allows("http://192.168.1.5:8080", "192.168.1.5:9090"), "any address"
+    assert not classroom.allows("http://192.168.1.5:8080", "10.0.0.1:9090")
+    assert not classroom.allows("http://evil.example:8080", "192.168.1.5:9090")
+    assert classroom.allows("HTTPS://Robot.example")
+    assert OriginPolicy.default("127.0.0.1", 8080, ["*"]).allows("http://anything:1")

@@ -5,14 +5,17 @@ from __future__ import annotations
 import asyncio
 import itertools
 import json
+import socket
 import subprocess
 import sys
 import time
 import urllib.request
+from collections.abc import Iterator
 
 import pytest
 import roslibpy
 from websockets.asyncio.client import connect
+from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from server_process import ADMIN_TOKEN, ServerProcess, free_port, start_server, wait_for
 
@@ -119,7 +122,9 @@ def test_malformed_input_leaves_the_connection_usable(server: ServerProcess) -> 
     bad = ["{nope", "[]", json.dumps({"op": "warp"}), json.dumps({"op": "subscribe"}),
            json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": {"linear": {"x": "a"}}}),
            '{"op": "publish", "topic": "/cmd_vel", "msg": {"linear": {"x": NaN}}}',
-           b"\xff\xfe"]
+           b"\xff\xfe", "[" * 200_000 + "]" * 200_000,
+           json.dumps({"op": "publish", "topic": "/cmd_vel",
+                       "msg": {"linear": {"x": [0.5] * 100_000}}})]
     received = asyncio.run(raw_session(server, bad))
     statuses = [m for m in received if m["op"] == "status"]
     assert len(statuses) == len(bad)
@@ -136,9 +141,86 @@ def test_oversized_frame_closes_with_a_reason(server: ServerProcess) -> None:
                     await websocket.recv()
             return websocket.close_code, websocket.close_reason
 
-    code, _ = asyncio.run(send_huge())
+    code, reason = asyncio.run(send_huge())
     assert code == 1009
+    assert reason is not None and "exceeds limit of 1048576 bytes" in reason
     assert server.health()["status"] == "ok"
+
+
+async def closed_after(url: str, frames: list[str]) -> tuple[int | None, str | None]:
+    """Send ``frames`` as fast as possible and return how the server closed the connection."""
+    async with connect(url, max_size=None) as websocket:
+        try:
+            for frame in frames:
+                await websocket.send(frame)
+            async with asyncio.timeout(5):
+                while True:
+                    await websocket.recv()
+        except ConnectionClosed:
+            pass
+        return websocket.close_code, websocket.close_reason
+
+
+def test_flooding_client_is_closed_for_policy_violation(server: ServerProcess) -> None:
+    flood = [json.dumps({"op": "set_level", "level": "none"})] * 2000
+    code, reason = asyncio.run(closed_after(server.ws_url, flood))
+    assert (code, reason) == (1008, "rate limit: more than 200 messages/s")
+    assert server.health()["status"] == "ok"
+    wait_for(lambda: server.health()["clients"] <= 1, what="the flooder to be forgotten")
+
+
+@pytest.fixture(scope="module")
+def strict() -> Iterator[ServerProcess]:
+    """A server with small limits and one extra allowed origin."""
+    running = start_server(["--max-rate", "20", "--max-frame-bytes", "4096",
+                            "--allow-origin", "https://robot.example"])
+    yield running
+    running.stop()
+
+
+def test_limits_are_options(strict: ServerProcess) -> None:
+    code, reason = asyncio.run(closed_after(strict.ws_url, ["x" * 5000]))
+    assert code == 1009 and reason is not None and "limit of 4096 bytes" in reason
+    steady = [json.dumps({"op": "set_level", "level": "none"})] * 15
+
+    async def burst_then_call() -> dict:
+        async with connect(strict.ws_url) as websocket:
+            for frame in steady:
+                await websocket.send(frame)
+            await websocket.send(json.dumps({"op": "call_service", "id": "n",
+                                             "service": "/rosapi/nodes"}))
+            async with asyncio.timeout(5):
+                return dict(json.loads(await websocket.recv()))
+
+    assert asyncio.run(burst_then_call())["result"] is True, "a burst within the rate passes"
+    code, reason = asyncio.run(closed_after(strict.ws_url, steady * 3))
+    assert (code, reason) == (1008, "rate limit: more than 20 messages/s")
+
+
+def handshake(url: str, origin: str | None) -> int:
+    """Open a WebSocket with this Origin header; the HTTP status (101 when accepted)."""
+    async def attempt() -> int:
+        try:
+            async with connect(url, origin=origin) as websocket:  # type: ignore[arg-type]
+                await websocket.send(json.dumps({"op": "set_level", "level": "none"}))
+                return 101
+        except InvalidStatus as refused:
+            return refused.response.status_code
+    return asyncio.run(attempt())
+
+
+def test_pages_from_other_origins_are_refused_at_the_handshake(strict: ServerProcess) -> None:
+    own = f"http://127.0.0.1:{strict.http_port}"
+    assert handshake(strict.ws_url, None) == 101, "roslibpy and Node send no Origin"
+    assert handshake(strict.ws_url, own) == 101
+    assert handshake(strict.ws_url, f"http://localhost:{strict.http_port}") == 101
+    assert handshake(strict.ws_url, "https://robot.example") == 101, "--allow-origin"
+    assert handshake(strict.ws_url, "https://evil.example") == 403
+    assert handshake(strict.ws_url, f"http://127.0.0.1:{strict.ws_port + 1}") == 101, \
+        "pages from this machine, any port"
+    assert handshake(strict.ws_url, "http://10.11.12.13:8080") == 403
+    strict.stop()
+    assert "origin https://evil.example is not allowed" in "".join(strict.output)
 
 
 def test_healthz_on_both_ports(server: ServerProcess) -> None:
@@ -211,3 +293,56 @@ def test_missing_page_libraries_are_named_in_the_banner(tmp_path) -> None:
     installed = start_server()
     installed.stop()
     assert "npm ci" not in "".join(installed.output)
+
+
+def test_client_that_stops_reading_stalls_only_itself(server: ServerProcess) -> None:
+    """A real socket with a tiny receive buffer that never reads, next to a healthy client."""
+    async def scenario() -> tuple[int, dict]:
+        sock = socket.create_connection(("127.0.0.1", server.ws_port))
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        sock.setblocking(False)
+        stalled = await connect(server.ws_url, sock=sock, max_queue=1)
+        healthy = await connect(server.ws_url)
+        for topic, length in (("/scan", 5), ("/odom", 5), ("/ground_truth", 5)):
+            await stalled.send(json.dumps({"op": "subscribe", "topic": topic,
+                                           "queue_length": length}))
+        await healthy.send(json.dumps({"op": "subscribe", "topic": "/odom"}))
+        # The stalled client's socket and websockets' buffers fill; then its outbox does.
+        await asyncio.to_thread(wait_for, lambda: server.health()["queued_frames"] >= 10,
+                                15.0, "the stalled client's outbox to fill")
+        first = server.health()
+        received = 0
+        async with asyncio.timeout(10):
+            while received < 40:  # 2 s of /odom at 20 Hz
+                if json.loads(await healthy.recv()).get("topic") == "/odom":
+                    received += 1
+        last = server.health()
+        for websocket in (stalled, healthy):  # a closing handshake waits for unread frames
+            websocket.transport.abort()
+        return last["ticks"] - first["ticks"], last
+
+    before = server.health()["clients"]
+    ticks, health = asyncio.run(scenario())
+    assert ticks <= 40 + 3, "the healthy client got every /odom while the other stalled"
+    assert abs(health["ticks"] - health["ticks_due"]) <= 1, "the tick loop kept its schedule"
+    assert health["queued_frames"] <= 15, "per subscription, only the newest 5 wait"
+    wait_for(lambda: server.health()["clients"] == before, what="both clients to be forgotten")
+
+
+def test_connect_disconnect_churn_leaves_no_session(server: ServerProcess) -> None:
+    async def churn(cycles: int) -> None:
+        for cycle in range(cycles):
+            websocket = await connect(server.ws_url)
+            await websocket.send(json.dumps({"op": "subscribe", "topic": "/scan"}))
+            await websocket.send(json.dumps({"op": "advertise", "topic": f"/c{cycle}",
+                                             "type": "std_msgs/String"}))
+            await websocket.recv()
+            if cycle % 2:
+                websocket.transport.abort()  # vanish without a close frame
+            else:
+                await websocket.close()
+
+    before = server.health()["clients"]
+    asyncio.run(churn(40))
+    wait_for(lambda: server.health()["clients"] == before, what="every churned session gone")
+    assert server.health()["queued_frames"] == 0 or before > 0

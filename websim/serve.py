@@ -10,15 +10,18 @@ import argparse
 import asyncio
 import errno
 import logging
+import math
 import os
 import secrets
 import signal
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from physics.params import PROJECT_DIR
-from ros_nodes.rosbridge.server import SimServer, start_websocket
+from ros_nodes.rosbridge.limits import DEFAULT_MAX_RATE, OriginPolicy
+from ros_nodes.rosbridge.server import MAX_FRAME_BYTES, SimServer, start_websocket
 from ros_nodes.virtual_robot_core import VirtualRobot
 from websim.http_static import start_http
 
@@ -41,6 +44,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="web interface port (default 8080)")
     parser.add_argument("--admin-token", default=None,
                         help="secret for admin rights (default: random, printed at start)")
+    parser.add_argument("--max-rate", type=_positive(float), default=DEFAULT_MAX_RATE,
+                        metavar="N",
+                        help="messages/s one client may send before it is disconnected "
+                             f"(close 1008; default {DEFAULT_MAX_RATE:g}; a message counts "
+                             "once per started 16 KiB)")
+    parser.add_argument("--max-frame-bytes", type=_positive(int), default=MAX_FRAME_BYTES,
+                        metavar="BYTES",
+                        help="largest incoming WebSocket message; larger ones close the "
+                             f"connection (1009; default {MAX_FRAME_BYTES})")
+    parser.add_argument("--allow-origin", action="append", default=[], metavar="URL",
+                        help="also accept browser pages from this origin (e.g. "
+                             "http://robot.example:8080); repeatable; '*' accepts any page. "
+                             "Default: the pages this server serves, pages from this machine "
+                             "(localhost, any port) and clients without an Origin (roslibpy, "
+                             "Node)")
     parser.add_argument("--ros", action="store_true",
                         help="also run the virtual_robot node on the ROS 2 graph and relay "
                              "rosbridge topics to it (needs rclpy: pip install '.[ros]')")
@@ -50,6 +68,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="logging level (default warning)")
 
 
+def _positive(kind: type[float] | type[int]) -> Callable[[str], float]:
+    """An argparse type: a number of ``kind`` greater than zero."""
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from None
+        if not (math.isfinite(value) and value > 0):
+            raise argparse.ArgumentTypeError(f"must be greater than 0, got '{text}'")
+        return value
+    return parse
+
+
 def _url_host(host: str) -> str:
     return "localhost" if host in ("0.0.0.0", "::", "127.0.0.1", "") else host
 
@@ -57,9 +88,11 @@ def _url_host(host: str) -> str:
 async def serve_forever(args: argparse.Namespace, robot: VirtualRobot) -> int:
     """Run until SIGINT or SIGTERM; returns the exit code."""
     token = args.admin_token or secrets.token_urlsafe(16)
-    server = SimServer(robot, token)
+    origins = OriginPolicy.default(args.host, args.http_port, args.allow_origin)
+    server = SimServer(robot, token, max_rate=args.max_rate, origins=origins)
     try:
-        websocket = await start_websocket(server, args.host, args.ws_port)
+        websocket = await start_websocket(server, args.host, args.ws_port,
+                                          args.max_frame_bytes)
     except OSError as error:
         return _port_error("WebSocket", args.host, args.ws_port, error)
     try:

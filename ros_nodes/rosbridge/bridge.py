@@ -6,9 +6,11 @@ topics between clients as rosbridge does, answers services, and queues every out
 the right client's ``Outbox``. The server (``server.py``) only moves frames between sockets
 and outboxes and calls ``publish`` once per tick. Nothing here awaits or touches a socket.
 
-Errors never close the connection or change anything else: a failed ``call_service`` gets a
-``service_response`` with ``result: false`` and the reason in ``values``; any other error is
-logged and, for a client that asked with ``set_level``, sent as a ``status`` message.
+What a client may publish, subscribe, call and offer is ``ros_nodes.access.check``, asked once
+per operation here. Errors never close the connection or change anything else: a failed
+``call_service`` gets a ``service_response`` with ``result: false`` and the reason in
+``values``; any other error is logged and, for a client that asked with ``set_level``, sent as
+a ``status`` message (reasons cut to ``MAX_REASON_CHARS``).
 
 With a ``Graph`` attached (``websim serve --ros``), topics reach beyond the clients: a
 subscription to a topic the robot does not publish also subscribes on the ROS graph, and what
@@ -26,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from physics import ConfigError
+from ros_nodes import access
 from ros_nodes.messages import normalize_service_type, normalize_type
 from ros_nodes.rosbridge.encoding import parse_json, to_cbor, to_json
 from ros_nodes.rosbridge.outbox import Frame, Outbox
@@ -41,6 +44,17 @@ THROTTLE_JITTER_S = 0.005
 """Tick jitter a throttle tolerates: ``throttle_rate`` is the least time between two messages
 (rosbridge's definition), less this, so a 200 ms throttle on the 20 Hz /odom gives 5 Hz even
 when a tick starts a few milliseconds early relative to the last one sent."""
+
+
+MAX_REASON_CHARS = 300
+"""Longest error reason logged or sent back; reasons quote input, which may be a megabyte."""
+
+
+def shorten(reason: str) -> str:
+    """``reason``, cut to ``MAX_REASON_CHARS`` with its full length noted."""
+    if len(reason) <= MAX_REASON_CHARS:
+        return reason
+    return f"{reason[:MAX_REASON_CHARS]}... ({len(reason)} characters)"
 
 
 class BridgeError(Exception):
@@ -256,12 +270,26 @@ class Bridge:
             if not isinstance(message, dict):
                 raise ProtocolError(f"expected a JSON object, got {type(message).__name__}")
             op = check_fields(message)
+            name = message.get("topic", message.get("service"))
+            if isinstance(name, str):
+                try:
+                    access.check(session, op, name)
+                except access.AccessError as denied:
+                    if op != "call_service":
+                        raise BridgeError(str(denied)) from None
+                    log.warning("client %s: %s", session.peer, denied)
+                    self._answer_failure(session, message.get("id"), name, str(denied))
+                    return
             self._handlers[op](session, message)
         except (ProtocolError, BridgeError, ConfigError) as error:
             self.report(session, str(error), message)
 
     def report(self, session: Session, reason: str, message: Any = None) -> None:
-        """Log an error and, for a client that asked with set_level, send it as a status."""
+        """Log an error and, for a client that asked with set_level, send it as a status.
+
+        A reason longer than ``MAX_REASON_CHARS`` is cut: it may quote the client's input.
+        """
+        reason = shorten(reason)
         log.warning("client %s: %s", session.peer, reason)
         level = session.status_level
         if level is not None and STATUS_LEVELS.index(level) <= STATUS_LEVELS.index("error"):
@@ -285,8 +313,6 @@ class Bridge:
 
     def _advertise(self, session: Session, message: dict[str, Any]) -> None:
         topic = message["topic"]
-        if topic in self._owned:
-            raise BridgeError(f"{topic} is published by the simulator; clients cannot publish it")
         type_name = self._known_type(topic, message["type"])
         self._topic_types[topic] = type_name
         session.advertised[topic] = type_name
@@ -324,8 +350,6 @@ class Bridge:
 
     def _publish(self, session: Session, message: dict[str, Any]) -> None:
         topic = message["topic"]
-        if topic in self._owned:
-            raise BridgeError(f"{topic} is published by the simulator; clients cannot publish it")
         if topic not in session.advertised and topic not in self._topic_types:
             raise BridgeError(f"publish to {topic}: advertise it first (type unknown)")
         msg = message["msg"]
@@ -446,8 +470,9 @@ class Bridge:
         try:
             values = handler(args, session)
         except (ServiceError, BridgeError, ConfigError) as error:
-            log.warning("client %s: %s failed: %s", session.peer, service, error)
-            self._answer_failure(session, call_id, service, str(error))
+            reason = shorten(str(error))
+            log.warning("client %s: %s failed: %s", session.peer, service, reason)
+            self._answer_failure(session, call_id, service, reason)
             return
         response: dict[str, Any] = {"op": "service_response", "service": service,
                                     "values": dict(values), "result": True}

@@ -55,10 +55,42 @@ def to_cbor(message: Any) -> bytes:
     return cbor2.dumps(_pack_typed_arrays(message))
 
 
+MAX_NESTING = 64
+"""Deepest nesting of objects and arrays an incoming message may have. ROS messages nest
+fewer than ten levels (a MarkerArray: five); deeper input only exists to exhaust the stack, and
+json.loads itself gives up near 1000 levels with a RecursionError."""
+
+
 def parse_json(text: str | bytes) -> Any:
     """Decode an incoming JSON frame.
 
     ``NaN`` and ``Infinity`` literals decode to float nan and inf and are refused where a
     finite number is needed (a Twist), instead of failing the whole frame.
+
+    Raises:
+        ValueError: invalid JSON, or nested more than ``MAX_NESTING`` levels deep.
     """
-    return json.loads(text)
+    try:
+        value = json.loads(text)
+    except RecursionError:
+        raise ValueError(f"too deeply nested (more than {MAX_NESTING} levels)") from None
+    brackets = text.count("[") + text.count("{") if isinstance(text, str) else \
+        text.count(b"[") + text.count(b"{")
+    if brackets > MAX_NESTING and nesting_exceeds(value, MAX_NESTING):  # count: a fast bound
+        raise ValueError(f"too deeply nested (more than {MAX_NESTING} levels)")
+    return value
+
+
+def nesting_exceeds(value: Any, limit: int) -> bool:
+    """Whether ``value`` has objects or arrays nested more than ``limit`` deep (no recursion)."""
+    if not isinstance(value, (dict, list)):
+        return False
+    stack: list[tuple[Any, int]] = [(value, 1)]
+    while stack:
+        item, depth = stack.pop()
+        if depth > limit:
+            return True
+        children = item.values() if isinstance(item, dict) else item
+        stack.extend((child, depth + 1) for child in children
+                     if isinstance(child, (dict, list)))
+    return False

@@ -1,0 +1,69 @@
+"""The server's tick loop, run in-process on a real event loop with a real robot and bridge.
+
+An overloaded host is made real here: a task that holds the event loop for longer than a
+tick, as a flood of client work would. The loop must keep /odom at one per tick and give up
+/scan first.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from typing import Any
+
+from physics import Simulation, load_world
+from ros_nodes.rosbridge.bridge import Session
+from ros_nodes.rosbridge.outbox import Outbox
+from ros_nodes.rosbridge.server import SHED_SCANS_AFTER_S, SimServer
+from ros_nodes.virtual_robot_core import VirtualRobot
+
+TICKS = 40
+
+
+def subscribed_client(server: SimServer) -> Session:
+    """A session on /odom and /scan that keeps every frame (queue_length > the run)."""
+    session = Session("test-peer", False, Outbox())
+    server.bridge.connect(session)
+    for topic in ("/odom", "/scan"):
+        server.bridge.handle(session, json.dumps(
+            {"op": "subscribe", "topic": topic, "queue_length": 10 * TICKS}))
+    return session
+
+
+def published_topics(session: Session) -> list[str]:
+    topics = []
+    while (frame := session.outbox.pop()) is not None:
+        message: Any = json.loads(frame)
+        if message.get("op") == "publish":
+            topics.append(message["topic"])
+    return topics
+
+
+async def run_until(server: SimServer, ticks: int, hog_s: float) -> None:
+    """Tick until ``ticks`` have run while another task holds the loop ``hog_s`` at a time."""
+
+    async def hog() -> None:
+        while True:
+            time.sleep(hog_s)  # blocking on purpose: this is the overload
+            await asyncio.sleep(0)
+
+    ticking = asyncio.create_task(server.run_ticks())
+    hogging = asyncio.create_task(hog()) if hog_s > 0 else None
+    while server.stats.ticks < ticks:
+        await asyncio.sleep(0.005)
+    for task in (ticking, hogging):
+        if task is not None:
+            task.cancel()
+    await asyncio.gather(ticking, *(t for t in (hogging,) if t), return_exceptions=True)
+
+
+def test_an_overloaded_loop_sheds_scans_and_keeps_odometry() -> None:
+    server = SimServer(VirtualRobot(Simulation(load_world("empty"), seed=0)), "token")
+    session = subscribed_client(server)
+    asyncio.run(run_until(server, TICKS, hog_s=2.5 * SHED_SCANS_AFTER_S))
+    topics = published_topics(session)
+    assert topics.count("/odom") == server.stats.ticks
+    assert server.stats.scans_shed > 0
+    assert topics.count("/scan") + server.stats.scans_shed == server.stats.ticks // 2
+    assert server.health()["scans_shed"] == server.stats.scans_shed
