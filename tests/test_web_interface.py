@@ -212,6 +212,22 @@ def page_url(server: ServerProcess, path: str = "/", **query: str) -> str:
     params = "&".join(f"{key}={value}" for key, value in {"ws": server.ws_url, **query}.items())
     return f"{server.http_url}{path}?{params}"
 
+@contextlib.contextmanager
+def driving_page(browser: Any, bridge: Bridge, url: str,
+                 **context_options: Any) -> Iterator[tuple[Any, PageLog]]:
+    """The robot back at spawn, the page open in a fresh context, connected and showing
+    odometry; the context is closed afterwards."""
+    reset_robot(bridge)
+    context = browser.new_context(**context_options)
+    try:
+        page, log = open_page(context, url)
+        wait_connected(page)
+        wait_for_odom_in_page(page)
+        yield page, log
+    finally:
+        context.close()
+
+
 
 def wait_connected(page: Any, timeout_s: float = 15.0) -> None:
     page.wait_for_selector('#conn-status[data-status="connected"]', timeout=timeout_s * 1000)
@@ -279,12 +295,8 @@ def test_page_loads_locally_without_errors_and_connects(server: ServerProcess,
 @needs_browser
 def test_holding_arrow_up_drives_and_releasing_stops(server: ServerProcess, bridge: Bridge,
                                                      browser: Any) -> None:
-    reset_robot(bridge)
-    context = browser.new_context(viewport={"width": 1280, "height": 860})
-    try:
-        page, log = open_page(context, page_url(server))
-        wait_connected(page)
-        wait_for_odom_in_page(page)
+    with driving_page(browser, bridge, page_url(server),
+                      viewport={"width": 1280, "height": 860}) as (page, log):
         commands_before = len(bridge.messages("/cmd_vel"))
         odoms_before = len(bridge.messages("/odom"))
         page.keyboard.down("ArrowUp")
@@ -296,8 +308,6 @@ def test_holding_arrow_up_drives_and_releasing_stops(server: ServerProcess, brid
         commands = twist_pairs(bridge.messages("/cmd_vel")[commands_before:])
         screenshot(page, "main-after-drive.png")
         assert log.console_errors == [] and log.page_errors == []
-    finally:
-        context.close()
     assert speed_of(moving) == pytest.approx(SPEED_MPS)
     # About 1 s at 0.3 m/s: the key was held 1 s after the first motion, plus latency.
     assert 0.25 < x_of(stopped) < 0.5
@@ -310,12 +320,7 @@ def test_holding_arrow_up_drives_and_releasing_stops(server: ServerProcess, brid
 def test_no_driving_from_a_text_field_and_focus_loss_stops(server: ServerProcess,
                                                           bridge: Bridge,
                                                           browser: Any) -> None:
-    reset_robot(bridge)
-    context = browser.new_context()
-    try:
-        page, _ = open_page(context, page_url(server))
-        wait_connected(page)
-        wait_for_odom_in_page(page)
+    with driving_page(browser, bridge, page_url(server)) as (page, _):
         commands_before = len(bridge.messages("/cmd_vel"))
         page.focus("#pid-kp")
         page.keyboard.down("ArrowUp")
@@ -329,8 +334,6 @@ def test_no_driving_from_a_text_field_and_focus_loss_stops(server: ServerProcess
         stopped = wait_until_still(bridge)
         assert twist_pairs(bridge.messages("/cmd_vel"))[-1] == (0.0, 0.0)
         page.keyboard.up("w")
-    finally:
-        context.close()
     assert x_of(stopped) > 0
 
 
@@ -436,12 +439,8 @@ def test_ws_parameter_and_reconnect_after_a_server_restart(browser: Any) -> None
 @needs_browser
 def test_pid_panel_turns_the_robot_to_90_degrees(server: ServerProcess, bridge: Bridge,
                                                  browser: Any) -> None:
-    reset_robot(bridge)
-    context = browser.new_context(viewport={"width": 1280, "height": 860})
-    try:
-        page, log = open_page(context, page_url(server))
-        wait_connected(page)
-        wait_for_odom_in_page(page)
+    with driving_page(browser, bridge, page_url(server),
+                      viewport={"width": 1280, "height": 860}) as (page, log):
         page.keyboard.down("ArrowUp")  # a short drive first: the screenshot shows a trail
         wait_for(lambda: x_of(latest_odom(bridge)) > 0.3, what="a short drive")
         page.keyboard.up("ArrowUp")
@@ -465,8 +464,6 @@ def test_pid_panel_turns_the_robot_to_90_degrees(server: ServerProcess, bridge: 
             DOCS_SCREENSHOT.parent.mkdir(exist_ok=True)
             page.screenshot(path=str(DOCS_SCREENSHOT), full_page=True)
         assert log.console_errors == [] and log.page_errors == []
-    finally:
-        context.close()
     assert all(abs(h - 90 * DEG) < 2 * DEG for h in headings)
     assert linear == [0.0] * len(linear)  # the PID only turns
 
@@ -539,13 +536,8 @@ def test_admin_without_the_token_shows_the_refusal(server: ServerProcess, bridge
 def test_phone_shows_the_joystick_and_dragging_it_drives(server: ServerProcess,
                                                          bridge: Bridge,
                                                          browser: Any) -> None:
-    reset_robot(bridge)
-    context = browser.new_context(viewport={"width": 390, "height": 844}, has_touch=True,
-                                  is_mobile=True, device_scale_factor=3)
-    try:
-        page, log = open_page(context, page_url(server))
-        wait_connected(page)
-        wait_for_odom_in_page(page)
+    with driving_page(browser, bridge, page_url(server), viewport={"width": 390, "height": 844},
+                      has_touch=True, is_mobile=True, device_scale_factor=3) as (page, log):
         layout = page.evaluate(
             "({page: document.documentElement.scrollWidth,"
             " view: document.querySelector('#view').getBoundingClientRect().width})")
@@ -558,7 +550,7 @@ def test_phone_shows_the_joystick_and_dragging_it_drives(server: ServerProcess,
         zone.scroll_into_view_if_needed()
         box = zone.bounding_box()
         x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
-        touch = context.new_cdp_session(page)
+        touch = page.context.new_cdp_session(page)
 
         def finger(kind: str, points: list[dict[str, float]]) -> None:
             touch.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": points})
@@ -574,8 +566,6 @@ def test_phone_shows_the_joystick_and_dragging_it_drives(server: ServerProcess,
         stopped = wait_until_still(bridge)
         assert twist_pairs(bridge.messages("/cmd_vel"))[-1] == (0.0, 0.0)
         assert log.console_errors == [] and log.page_errors == []
-    finally:
-        context.close()
     assert speed_of(moving) > 0.1  # forward, at the joystick's deflection
     assert abs(yaw_of(stopped)) < 0.05  # straight up: hardly any turning
     assert x_of(stopped) > 0.05

@@ -6,7 +6,7 @@
 // kept in sessionStorage; the banner's /admin?token=TOKEN link is accepted and the token is
 // then removed from the address bar.
 
-import { missingLibraries, ROSLIB } from './vendor.js';
+import { ROSLIB } from './vendor.js';
 import {
   Connection, initialWsUrl, loadSiteConfig, ServiceCallError, TOKEN_KEY, takeToken,
 } from './connection.js';
@@ -15,7 +15,9 @@ import { createState } from './state.js';
 import { LivePlots } from './plots.js';
 import { Readouts } from './readouts.js';
 import { getParameters, setParameters } from './params.js';
-import { $, closeWithPage, createView, showFatal, subscribeRobot } from './page.js';
+import {
+  $, closeWithPage, createView, librariesLoaded, showFatal, subscribeRobot,
+} from './page.js';
 import { bindKeys, Teleop } from './teleop.js';
 
 /** The parameter form. Events: 'refused' when the bridge refuses a set_parameters call. */
@@ -145,12 +147,7 @@ function bindTokenCard(connection, storage, params) {
 }
 
 async function main() {
-  const missing = missingLibraries();
-  if (missing.length) {
-    showFatal(`Could not load ${missing.join(' and ')} from web-interface/node_modules: run `
-      + '"npm ci" in web-interface/ (or "bash scripts/test.sh") and reload.');
-    return;
-  }
+  if (!librariesLoaded()) return;
   const storage = window.sessionStorage;
   const token = takeToken(window.location, window.history, storage);
   const config = await loadSiteConfig();

@@ -1,6 +1,6 @@
 // The student page: the view, teleop, readouts, live plots and the heading PID panel.
 
-import { missingLibraries, ROSLIB } from './vendor.js';
+import { ROSLIB } from './vendor.js';
 import { Connection, initialWsUrl, loadSiteConfig } from './connection.js';
 import { bindConnectionBar, runFrameLoop } from './connection-bar.js';
 import { createState } from './state.js';
@@ -8,16 +8,11 @@ import { LivePlots } from './plots.js';
 import { PidPanel } from './pid-panel.js';
 import { Readouts } from './readouts.js';
 import {
-  $, closeWithPage, createTeleop, createView, showFatal, subscribeRobot,
+  $, closeWithPage, createTeleop, createView, librariesLoaded, showFatal, subscribeRobot,
 } from './page.js';
 
 async function main() {
-  const missing = missingLibraries();
-  if (missing.length) {
-    showFatal(`Could not load ${missing.join(' and ')} from web-interface/node_modules: run `
-      + '"npm ci" in web-interface/ (or "bash scripts/test.sh") and reload.');
-    return;
-  }
+  if (!librariesLoaded()) return;
   const config = await loadSiteConfig();
   const state = createState();
   const connection = new Connection(ROSLIB, { url: initialWsUrl(window.location, config.ws) });

@@ -1,7 +1,7 @@
 // What both pages share: the robot's subscriptions, the view with its buttons, teleop with its
 // controls, and the page-wide error banner. The pages (main.js, admin.js) only wire them.
 
-import { nipplejs } from './vendor.js';
+import { missingLibraries, nipplejs } from './vendor.js';
 import {
   clearTrail, onCommand, onGroundTruth, onOdometry, onScan, onTfStatic, onWorld,
 } from './state.js';
@@ -71,6 +71,16 @@ export function showFatal(text) {
   const banner = $('#fatal');
   banner.textContent = text;
   banner.hidden = false;
+}
+
+/** True when the npm libraries loaded; otherwise says on the page how to install them. */
+export function librariesLoaded() {
+  const missing = missingLibraries();
+  if (missing.length) {
+    showFatal(`Could not load ${missing.join(' and ')} from web-interface/node_modules: run `
+      + '"npm ci" in web-interface/ (or "bash scripts/test.sh") and reload.');
+  }
+  return missing.length === 0;
 }
 
 /** Closes the connection (a zero /cmd_vel first) when the page goes, reopens it on return. */
