@@ -145,7 +145,11 @@ def test_roslibjs_page_drives_the_robot_in_chromium(server: ServerProcess) -> No
         expect(page.locator("#odom")).to_contain_text("x=0.000 m y=0.000 m",
                                                       timeout=10_000)
         page.click("#forward")
-        expect(page.locator("#odom")).to_contain_text("x=0.3", timeout=10_000)
+        # Polled every animation frame: expect()'s back-off (up to 1 s) can step over
+        # the 0.3 m the robot passes at 0.3 m/s.
+        page.wait_for_function(
+            "parseFloat(document.querySelector('#odom').textContent.split('x=')[1]) >= 0.3",
+            timeout=10_000)
         page.click("#stop")
         odom_text = page.locator("#odom").text_content() or ""
         assert errors == []
