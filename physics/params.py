@@ -20,10 +20,8 @@ import yaml
 
 from physics.validation import (
     ConfigError,
-    as_finite_float,
+    as_float_in_range,
     as_mapping,
-    as_non_negative_float,
-    as_positive_float,
     check_keys,
     fail,
 )
@@ -47,9 +45,41 @@ def _shipped_defaults() -> Mapping[str, Mapping[str, Any]]:
                              for name, section in document.items()})
 
 
-def _shipped(section: str, name: str) -> Any:
-    """A dataclass field whose default is ``name`` in ``section`` of the shipped file."""
-    return field(default_factory=lambda: _shipped_defaults()[section][name])
+def _shipped(section: str, name: str, minimum: float, maximum: float, unit: str) -> Any:
+    """A dataclass field whose default is ``name`` in ``section`` of the shipped file.
+
+    ``minimum`` and ``maximum`` bound every value the field may take (from a file, or set at
+    runtime): the range in which the model is physically sensible and numerically safe.
+    """
+    return field(default_factory=lambda: _shipped_defaults()[section][name],
+                 metadata={"range": (minimum, maximum), "unit": unit})
+
+
+def field_range(cls: type[Any], name: str) -> tuple[float, float]:
+    """The (minimum, maximum) a field of a parameter dataclass may take; KeyError if none."""
+    for item in dataclasses.fields(cls):
+        if item.name == name and "range" in item.metadata:
+            low, high = item.metadata["range"]
+            return float(low), float(high)
+    raise KeyError(f"{cls.__name__}.{name} has no range")
+
+
+def field_unit(cls: type[Any], name: str) -> str:
+    """The unit of a field of a parameter dataclass (``""``: none or dimensionless)."""
+    for item in dataclasses.fields(cls):
+        if item.name == name:
+            return str(item.metadata.get("unit", ""))
+    raise KeyError(f"{cls.__name__} has no field {name}")
+
+
+def _check_ranges(instance: Any, names: list[str] | None = None) -> None:
+    """Validate (and store as float) each ranged field of a frozen dataclass instance."""
+    for item in dataclasses.fields(instance):
+        if "range" not in item.metadata or (names is not None and item.name not in names):
+            continue
+        low, high = item.metadata["range"]
+        value = as_float_in_range(item.name, getattr(instance, item.name), low, high)
+        object.__setattr__(instance, item.name, value)
 
 
 @dataclass(frozen=True)
@@ -67,19 +97,17 @@ class RobotParams:
         footprint_radius_m: radius of the circular collision footprint (m).
     """
 
-    mass_kg: float = _shipped("robot", "mass_kg")
-    wheel_radius_m: float = _shipped("robot", "wheel_radius_m")
-    wheelbase_m: float = _shipped("robot", "wheelbase_m")
-    inertia_kg_m2: float = _shipped("robot", "inertia_kg_m2")
-    max_linear_mps: float = _shipped("robot", "max_linear_mps")
-    max_angular_rps: float = _shipped("robot", "max_angular_rps")
-    max_wheel_force_n: float = _shipped("robot", "max_wheel_force_n")
-    footprint_radius_m: float = _shipped("robot", "footprint_radius_m")
+    mass_kg: float = _shipped("robot", "mass_kg", 0.01, 1000.0, "kg")
+    wheel_radius_m: float = _shipped("robot", "wheel_radius_m", 0.005, 1.0, "m")
+    wheelbase_m: float = _shipped("robot", "wheelbase_m", 0.02, 5.0, "m")
+    inertia_kg_m2: float = _shipped("robot", "inertia_kg_m2", 1e-5, 1000.0, "kg m^2")
+    max_linear_mps: float = _shipped("robot", "max_linear_mps", 0.01, 10.0, "m/s")
+    max_angular_rps: float = _shipped("robot", "max_angular_rps", 0.01, 20.0, "rad/s")
+    max_wheel_force_n: float = _shipped("robot", "max_wheel_force_n", 0.001, 1e6, "N")
+    footprint_radius_m: float = _shipped("robot", "footprint_radius_m", 0.01, 5.0, "m")
 
     def __post_init__(self) -> None:
-        for item in dataclasses.fields(self):
-            value = as_positive_float(item.name, getattr(self, item.name))
-            object.__setattr__(self, item.name, value)
+        _check_ranges(self)
 
     @property
     def half_wheelbase_m(self) -> float:
@@ -125,26 +153,24 @@ class LidarParams:
             course platform's behaviour, the default) or ``"inf"`` (REP 117).
     """
 
-    num_rays: int = _shipped("lidar", "num_rays")
-    angle_min_rad: float = _shipped("lidar", "angle_min_rad")
-    range_min_m: float = _shipped("lidar", "range_min_m")
-    range_max_m: float = _shipped("lidar", "range_max_m")
-    scan_time_s: float = _shipped("lidar", "scan_time_s")
-    mount_x_m: float = _shipped("lidar", "mount_x_m")
-    mount_y_m: float = _shipped("lidar", "mount_y_m")
-    mount_yaw_rad: float = _shipped("lidar", "mount_yaw_rad")
-    no_return: str = _shipped("lidar", "no_return")
+    num_rays: int = _shipped("lidar", "num_rays", 1, 4096, "")
+    angle_min_rad: float = _shipped("lidar", "angle_min_rad", -2 * math.pi, 2 * math.pi, "rad")
+    range_min_m: float = _shipped("lidar", "range_min_m", 0.0, 100.0, "m")
+    range_max_m: float = _shipped("lidar", "range_max_m", 0.01, 100.0, "m")
+    scan_time_s: float = _shipped("lidar", "scan_time_s", 0.001, 10.0, "s")
+    mount_x_m: float = _shipped("lidar", "mount_x_m", -5.0, 5.0, "m")
+    mount_y_m: float = _shipped("lidar", "mount_y_m", -5.0, 5.0, "m")
+    mount_yaw_rad: float = _shipped("lidar", "mount_yaw_rad", -2 * math.pi, 2 * math.pi, "rad")
+    no_return: str = field(default_factory=lambda: _shipped_defaults()["lidar"]["no_return"])
 
     def __post_init__(self) -> None:
+        low, high = field_range(LidarParams, "num_rays")
         if isinstance(self.num_rays, bool) or not isinstance(self.num_rays, int) \
-                or self.num_rays < 1:
-            raise fail("num_rays", f"must be a whole number >= 1, got {self.num_rays!r}")
-        for name in ("angle_min_rad", "mount_x_m", "mount_y_m", "mount_yaw_rad"):
-            object.__setattr__(self, name, as_finite_float(name, getattr(self, name)))
-        for name in ("range_min_m",):
-            object.__setattr__(self, name, as_non_negative_float(name, getattr(self, name)))
-        for name in ("range_max_m", "scan_time_s"):
-            object.__setattr__(self, name, as_positive_float(name, getattr(self, name)))
+                or not low <= self.num_rays <= high:
+            raise fail("num_rays", f"must be a whole number from {low:g} to {high:g}, "
+                                   f"got {self.num_rays!r}")
+        _check_ranges(self, [item.name for item in dataclasses.fields(self)
+                             if item.name != "num_rays"])
         if self.range_min_m >= self.range_max_m:
             raise fail("range_min_m", f"must be < range_max_m ({self.range_max_m!r}), "
                                       f"got {self.range_min_m!r}")
@@ -183,14 +209,12 @@ class NoiseParams:
         scan_sigma_m: on every lidar hit (m); no-return and too-close readings stay exact.
     """
 
-    odom_linear_sigma_mps: float = _shipped("noise", "odom_linear_sigma_mps")
-    odom_angular_sigma_rps: float = _shipped("noise", "odom_angular_sigma_rps")
-    scan_sigma_m: float = _shipped("noise", "scan_sigma_m")
+    odom_linear_sigma_mps: float = _shipped("noise", "odom_linear_sigma_mps", 0.0, 1.0, "m/s")
+    odom_angular_sigma_rps: float = _shipped("noise", "odom_angular_sigma_rps", 0.0, 5.0, "rad/s")
+    scan_sigma_m: float = _shipped("noise", "scan_sigma_m", 0.0, 1.0, "m")
 
     def __post_init__(self) -> None:
-        for item in dataclasses.fields(self):
-            value = as_non_negative_float(item.name, getattr(self, item.name))
-            object.__setattr__(self, item.name, value)
+        _check_ranges(self)
 
 
 @dataclass(frozen=True)

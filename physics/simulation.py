@@ -65,10 +65,16 @@ class Simulation:
         self._robot = MobileRobotPhysics(params, self._world_space, world.start, mode)
         self._lidar = Lidar(LidarParams() if lidar is None else lidar, self._world_space)
         self._odometry = OdometryIntegrator()
+        self._seed = seed
         self._seed_noise(seed)
         self._command = Command(0.0, 0.0)
         self._tick = 0
         self._scan_cache: tuple[int, LaserScan] | None = None
+
+    @property
+    def seed(self) -> int | None:
+        """The seed the simulation's random generator started from (None: fresh entropy)."""
+        return self._seed
 
     @property
     def world(self) -> World:

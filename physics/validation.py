@@ -48,9 +48,21 @@ def as_finite_float(where: str, value: Any) -> float:
     """Return ``value`` as a float if it is a finite real number (bools are refused)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise fail(where, f"expected a number, got {type(value).__name__} {value!r}")
-    number = float(value)
+    try:
+        number = float(value)
+    except OverflowError:  # an integer beyond float range, e.g. 10**400 from JSON
+        raise fail(where, f"expected a finite number, got an integer of "
+                          f"{len(str(abs(value)))} digits") from None
     if not math.isfinite(number):
         raise fail(where, f"expected a finite number, got {value!r}")
+    return number
+
+
+def as_float_in_range(where: str, value: Any, minimum: float, maximum: float) -> float:
+    """Return ``value`` as a float if it is finite and within [minimum, maximum]."""
+    number = as_finite_float(where, value)
+    if not minimum <= number <= maximum:
+        raise fail(where, f"must be between {minimum:g} and {maximum:g}, got {value!r}")
     return number
 
 

@@ -8,13 +8,13 @@ refused with a reason and changes nothing.
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from physics import MODES, ConfigError, Simulation
-from physics.validation import as_non_negative_float
+from physics import MODES, ConfigError, NoiseParams, RobotParams, Simulation
+from physics.params import field_range, field_unit
+from physics.validation import as_finite_float, as_float_in_range
 from ros_nodes.messages import Message
 
 # rcl_interfaces/msg/ParameterType
@@ -39,40 +39,180 @@ _VALUE_FIELDS = {
 }
 
 
+ADMIN = "admin"
+"""``ParameterSpec.set_by``: changes at runtime, by admin clients (the token), ``ros2 param``."""
+
+AT_START = "start"
+"""``ParameterSpec.set_by``: read when the robot starts (a file, ``-p name:=value``); read-only
+afterwards."""
+
+
 @dataclass(frozen=True)
 class ParameterSpec:
-    """One runtime parameter.
+    """One parameter of the virtual robot: the one definition every transport derives from.
+
+    The embedded bridge's parameter services and rosapi, the rclpy node's ``declare_parameter``
+    and its validation, the admin page (through ``robot.json``) and the README's table all read
+    these fields.
 
     Attributes:
         name: the ROS parameter name.
         type_code: its ``rcl_interfaces/msg/ParameterType``.
-        description: what it does, with units.
+        description: what it does.
+        unit: SI unit, ``""`` when it has none.
+        default: the value a new robot starts with (robot and noise values come from
+            ``config/pi4b_params.yaml``).
+        minimum: smallest accepted value (numbers); None for strings and booleans.
+        maximum: largest accepted value (numbers); None for strings and booleans.
+        choices: the accepted values of a string parameter; empty: any string.
+        set_by: ``ADMIN`` (runtime: admin clients, ``ros2 param set``) or ``AT_START``.
+        embedded: whether the embedded bridge serves it (False: the rclpy node only).
     """
 
     name: str
     type_code: int
     description: str
+    unit: str
+    default: Any
+    minimum: float | None = None
+    maximum: float | None = None
+    choices: tuple[str, ...] = ()
+    set_by: str = ADMIN
+    embedded: bool = True
+
+    @property
+    def runtime(self) -> bool:
+        """Whether the parameter changes while the robot runs."""
+        return self.set_by == ADMIN
+
+    def validate(self, value: Any) -> Any:
+        """``value`` as this parameter holds it (integers become doubles for DOUBLE ones).
+
+        Raises:
+            ConfigError: wrong type, outside the range or not one of the choices.
+        """
+        if self.type_code == PARAMETER_DOUBLE:
+            number = _double(self.name, value)
+            assert self.minimum is not None and self.maximum is not None
+            return as_float_in_range(self.name, number, self.minimum, self.maximum)
+        if self.type_code == PARAMETER_INTEGER:
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ConfigError(f"{self.name}: expected an integer, got "
+                                  f"{type(value).__name__} {shorten_value(value)}")
+            assert self.minimum is not None and self.maximum is not None
+            if not self.minimum <= value <= self.maximum:
+                raise ConfigError(f"{self.name}: must be between {self.minimum:g} and "
+                                  f"{self.maximum:g}, got {shorten_value(value)}")
+            return value
+        if self.type_code == PARAMETER_BOOL:
+            if not isinstance(value, bool):
+                raise ConfigError(f"{self.name}: expected true or false, got "
+                                  f"{shorten_value(value)}")
+            return value
+        if not isinstance(value, str):
+            raise ConfigError(f"{self.name}: expected a string, got {type(value).__name__} "
+                              f"{shorten_value(value)}")
+        if self.choices and value not in self.choices:
+            raise ConfigError(f"{self.name}: must be one of {', '.join(self.choices)}, "
+                              f"got {shorten_value(value)}")
+        return value
+
+    def range_text(self) -> str:
+        """The accepted values, for docs and errors: ``0.01 to 1000``, ``kinematic, dynamic``."""
+        if self.choices:
+            return ", ".join(self.choices)
+        if self.type_code == PARAMETER_INTEGER:
+            return f"{self.minimum:.0f} to {self.maximum:.0f}"
+        if self.minimum is not None and self.maximum is not None:
+            return f"{self.minimum:g} to {self.maximum:g}"
+        return "true, false" if self.type_code == PARAMETER_BOOL else "any"
 
 
-PARAMETERS = (
-    ParameterSpec("mode", PARAMETER_STRING, "motion model: kinematic or dynamic"),
-    ParameterSpec("mass_kg", PARAMETER_DOUBLE, "chassis mass (kg); acts in dynamic mode"),
-    ParameterSpec("inertia_kg_m2", PARAMETER_DOUBLE,
-                  "yaw moment of inertia (kg m^2); acts in dynamic mode"),
-    ParameterSpec("max_linear_mps", PARAMETER_DOUBLE, "linear velocity limit (m/s)"),
-    ParameterSpec("max_angular_rps", PARAMETER_DOUBLE, "angular velocity limit (rad/s)"),
-    ParameterSpec("max_wheel_force_n", PARAMETER_DOUBLE,
-                  "traction force limit per wheel (N); dynamic mode"),
-    ParameterSpec("cmd_vel_timeout_s", PARAMETER_DOUBLE,
-                  "stop when no /cmd_vel arrived for this long (s); 0 keeps the last command "
-                  "(the course's behaviour)"),
-)
-"""The parameters ``get/set/list_parameters`` serve, in order."""
+def shorten_value(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters: values may be megabytes of input."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 200:
+        return f"an integer of {len(str(abs(value)))} digits"
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
+def _robot(name: str, description: str) -> ParameterSpec:
+    """A runtime parameter that is a field of ``RobotParams``: range, unit and default there."""
+    low, high = field_range(RobotParams, name)
+    return ParameterSpec(name, PARAMETER_DOUBLE, description, field_unit(RobotParams, name),
+                         getattr(RobotParams(), name), low, high)
+
+
+def _noise(name: str, description: str) -> ParameterSpec:
+    """A start-time noise sigma, a field of ``NoiseParams``."""
+    low, high = field_range(NoiseParams, name)
+    return ParameterSpec(name, PARAMETER_DOUBLE, description, field_unit(NoiseParams, name),
+                         getattr(NoiseParams(), name), low, high, set_by=AT_START)
+
 
 CMD_VEL_TIMEOUT_OFF_S = 0.0
 """The course's behaviour: the robot keeps the last command however old it is."""
 
+MAX_SEED = 2**32 - 1
+"""Largest noise seed (numpy accepts any, ROS integers are 64-bit; 32 bits is plenty)."""
+
+PARAMETERS = (
+    ParameterSpec("mode", PARAMETER_STRING, "motion model", "", MODES[0], choices=MODES),
+    _robot("mass_kg", "chassis mass; acts in dynamic mode"),
+    _robot("inertia_kg_m2", "yaw moment of inertia; acts in dynamic mode"),
+    _robot("max_linear_mps", "linear velocity limit; commands are clamped to it"),
+    _robot("max_angular_rps", "angular velocity limit; commands are clamped to it"),
+    _robot("max_wheel_force_n", "traction force limit per wheel; dynamic mode (very large "
+                                "values approach the kinematic model)"),
+    ParameterSpec("cmd_vel_timeout_s", PARAMETER_DOUBLE,
+                  "stop when no /cmd_vel arrived for this long; 0 keeps the last command "
+                  "(the course's behaviour)", "s", CMD_VEL_TIMEOUT_OFF_S, 0.0, 3600.0),
+    ParameterSpec("world", PARAMETER_STRING,
+                  "world file, or a shipped world's name (empty, maze, corridor)", "", "empty",
+                  set_by=AT_START),
+    ParameterSpec("seed", PARAMETER_INTEGER, "seed of the noise generator", "", 0, 0, MAX_SEED,
+                  set_by=AT_START),
+    _noise("odom_linear_sigma_mps", "odometry noise on the linear speed, per tick"),
+    _noise("odom_angular_sigma_rps", "odometry noise on the yaw rate, per tick"),
+    _noise("scan_sigma_m", "noise on every LiDAR hit"),
+    ParameterSpec("params_file", PARAMETER_STRING, "robot, LiDAR and noise parameter file "
+                  "(YAML)", "", "config/pi4b_params.yaml", set_by=AT_START, embedded=False),
+    ParameterSpec("cmd_vel_stamped", PARAMETER_BOOL,
+                  "subscribe /cmd_vel as geometry_msgs/TwistStamped (as Jazzy's navigation "
+                  "stack publishes) instead of Twist", "", False, set_by=AT_START,
+                  embedded=False),
+)
+"""Every parameter of the virtual robot, in the order services list them."""
+
+RUNTIME_PARAMETERS = tuple(spec for spec in PARAMETERS if spec.runtime)
+"""The parameters that change while the robot runs."""
+
+EMBEDDED_PARAMETERS = tuple(spec for spec in PARAMETERS if spec.embedded)
+"""The parameters the embedded bridge serves (runtime ones settable, start ones read-only)."""
+
 _BY_NAME = {spec.name: spec for spec in PARAMETERS}
+
+
+def parameter_spec(name: str) -> ParameterSpec:
+    """The spec of ``name``; KeyError if there is none."""
+    return _BY_NAME[name]
+
+
+def markdown_table() -> str:
+    """The README's parameter table, made from ``PARAMETERS``."""
+    rows = ["| name | type | default | range | unit | set | meaning |",
+            "|---|---|---|---|---|---|---|"]
+    for spec in PARAMETERS:
+        kind = {PARAMETER_DOUBLE: "double", PARAMETER_INTEGER: "integer",
+                PARAMETER_STRING: "string", PARAMETER_BOOL: "bool"}[spec.type_code]
+        when = "runtime (admin)" if spec.runtime else "at start"
+        if not spec.embedded:
+            when += ", node only"
+        default = f"`{spec.default}`" if not isinstance(spec.default, float) \
+            else f"`{spec.default:g}`"
+        rows.append(f"| `{spec.name}` | {kind} | {default} | {spec.range_text()} | "
+                    f"{spec.unit or '-'} | {when} | {spec.description} |")
+    return "\n".join(rows)
 
 
 def parameter_value_msg(value: Any) -> Message:
@@ -114,7 +254,7 @@ def value_from_parameter_value(msg: Any) -> Any:
 
 
 class RobotParameters:
-    """Get, set and list the runtime parameters of one simulation.
+    """Get, set and list the parameters of one simulation (``EMBEDDED_PARAMETERS``).
 
     Args:
         sim: the simulation whose parameters these are.
@@ -137,28 +277,38 @@ class RobotParameters:
 
     @staticmethod
     def names() -> list[str]:
-        """Every parameter name, in order."""
-        return [spec.name for spec in PARAMETERS]
+        """Every parameter name served, in order."""
+        return [spec.name for spec in EMBEDDED_PARAMETERS]
 
     @staticmethod
     def spec(name: str) -> ParameterSpec:
         """The spec of ``name``; KeyError if there is none."""
-        return _BY_NAME[name]
+        spec = _BY_NAME[name]
+        if not spec.embedded:
+            raise KeyError(name)
+        return spec
 
     def get(self, name: str) -> Any:
-        """The current value of ``name`` (a str or float); KeyError if unknown."""
-        spec = _BY_NAME[name]
+        """The current value of ``name``; KeyError if unknown."""
+        spec = self.spec(name)
         if spec.name == "mode":
             return self._sim.mode
         if spec.name == "cmd_vel_timeout_s":
             return self.cmd_vel_timeout_s
+        if spec.name == "world":
+            return self._sim.world.source
+        if spec.name == "seed":
+            return self._sim.seed if self._sim.seed is not None else 0
+        if hasattr(self._sim.noise, name):
+            return float(getattr(self._sim.noise, name))
         return float(getattr(self._sim.params, spec.name))
 
     def set(self, name: str, value: Any) -> None:
         """Set ``name`` to ``value`` now.
 
         Raises:
-            ConfigError: unknown name, wrong type or invalid value; nothing changes.
+            ConfigError: unknown name, read-only, wrong type or invalid value; nothing
+                changes.
         """
         self.set_many({name: value})
 
@@ -169,19 +319,16 @@ class RobotParameters:
             ConfigError: the first bad name or value, with the reason.
         """
         checked: dict[str, Any] = {}
-        robot_changes: dict[str, float] = {}
         for name, value in values.items():
-            spec = _BY_NAME.get(name)
-            if spec is None:
-                raise ConfigError(f"{name}: no such parameter (known: {', '.join(self.names())})")
-            if spec.type_code == PARAMETER_STRING:
-                if value not in MODES:
-                    raise ConfigError(f"{name}: must be one of {', '.join(MODES)}, got {value!r}")
-                checked[name] = value
-            elif name == "cmd_vel_timeout_s":
-                checked[name] = as_non_negative_float(name, _double(name, value))
-            else:
-                robot_changes[name] = checked[name] = _double(name, value)
+            spec = _BY_NAME.get(name) if isinstance(name, str) else None
+            if spec is None or not spec.embedded:
+                known = ", ".join(self.names())
+                raise ConfigError(f"{str(name)[:60]}: no such parameter (known: {known})")
+            if not spec.runtime:
+                raise ConfigError(f"{name}: read-only (it is set when the robot starts)")
+            checked[name] = spec.validate(value)
+        robot_changes = {name: value for name, value in checked.items()
+                         if hasattr(self._sim.params, name)}
         dataclasses.replace(self._sim.params, **robot_changes)  # the dataclass validates
         return checked
 
@@ -193,7 +340,7 @@ class RobotParameters:
         """
         checked = self.check(values)
         robot_changes = {name: value for name, value in checked.items()
-                         if name not in ("mode", "cmd_vel_timeout_s")}
+                         if hasattr(self._sim.params, name)}
         previous = self._sim.params
         self._sim.update_params(**robot_changes)
         if "mode" in checked:
@@ -211,7 +358,6 @@ class RobotParameters:
 def _double(name: str, value: Any) -> float:
     """A DOUBLE parameter's value; integers are accepted (``ros2 param set mass_kg 2``)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(f"{name}: expected a number, got {type(value).__name__} {value!r}")
-    if not math.isfinite(value):
-        raise ConfigError(f"{name}: expected a finite number, got {value!r}")
-    return float(value)
+        raise ConfigError(f"{name}: expected a number, got {type(value).__name__} "
+                          f"{shorten_value(value)}")
+    return as_finite_float(name, value)

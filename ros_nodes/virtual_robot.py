@@ -21,6 +21,7 @@ with it. Bad values are refused with the reason; nothing changes.
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -28,7 +29,12 @@ from typing import Any, Protocol, TypeVar
 
 try:
     import rclpy
-    from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+    from rcl_interfaces.msg import (
+        FloatingPointRange,
+        IntegerRange,
+        ParameterDescriptor,
+        SetParametersResult,
+    )
 
     # Humble has no rclpy.clock_type; later distributions re-export ClockType here.
     from rclpy.clock import Clock, ClockType  # type: ignore[attr-defined]
@@ -52,7 +58,14 @@ from physics import ConfigError, NoiseParams, Simulation, load_params, load_worl
 from physics.params import SHIPPED_PARAMS_FILE
 from ros_nodes.messages import stamp
 from ros_nodes.node_parameters import add_parameter_callbacks
-from ros_nodes.parameters import PARAMETER_DOUBLE, PARAMETERS
+from ros_nodes.parameters import (
+    PARAMETER_DOUBLE,
+    PARAMETER_INTEGER,
+    PARAMETERS,
+    RUNTIME_PARAMETERS,
+    ParameterSpec,
+    parameter_spec,
+)
 from ros_nodes.ros_interop import (
     MessageConversionError,
     PublisherFilter,
@@ -65,9 +78,6 @@ from ros_nodes.virtual_robot_core import Publication, VirtualRobot
 
 NODE_NAME = "virtual_robot"
 """The node's name, as on the real robot."""
-
-DEFAULT_WORLD = "empty"
-"""The shipped world the node starts in unless ``world`` says otherwise."""
 
 TF_MISSING_WARNING = (
     "tf2_msgs is not installed, so /tf and /tf_static are not published: it is not on PyPI. "
@@ -115,18 +125,37 @@ def qos_profile(spec: TopicSpec) -> QoSProfile:
                       durability=DurabilityPolicy.VOLATILE)
 
 
-def _descriptor(description: str, read_only: bool = False) -> ParameterDescriptor:
-    return ParameterDescriptor(description=description, read_only=read_only)
+def descriptor(spec: ParameterSpec) -> ParameterDescriptor:
+    """The ROS descriptor of a parameter: its description, unit, range and read-only flag.
+
+    rclpy itself then refuses values outside ``floating_point_range``/``integer_range``.
+    """
+    text = f"{spec.description} ({spec.unit})" if spec.unit else spec.description
+    result = ParameterDescriptor(description=text, read_only=not spec.runtime)
+    if spec.choices:
+        result.additional_constraints = f"one of {spec.range_text()}"
+    if spec.minimum is None or spec.maximum is None:
+        return result
+    if spec.type_code == PARAMETER_DOUBLE:
+        result.floating_point_range = [FloatingPointRange(
+            from_value=float(spec.minimum), to_value=float(spec.maximum), step=0.0)]
+    elif spec.type_code == PARAMETER_INTEGER:
+        result.integer_range = [IntegerRange(
+            from_value=int(spec.minimum), to_value=int(spec.maximum), step=0)]
+    return result
 
 
-_NOISE_PARAMETERS = {
-    "odom_linear_sigma_mps": "odometry noise on the linear speed, per tick (m/s)",
-    "odom_angular_sigma_rps": "odometry noise on the yaw rate, per tick (rad/s)",
-    "scan_sigma_m": "noise on every LiDAR hit (m)",
-}
-_ROBOT_PARAMETERS = {spec.name: spec for spec in PARAMETERS}
-_DOUBLE_PARAMETERS = {*_NOISE_PARAMETERS,
-                      *(spec.name for spec in PARAMETERS if spec.type_code == PARAMETER_DOUBLE)}
+def _declare(node: Node, spec: ParameterSpec, value: Any = None) -> Any:
+    """Declare ``spec`` on ``node`` (at ``value``, default its default); its value."""
+    default = spec.default if value is None else value
+    return node.declare_parameter(spec.name, default, descriptor(spec)).value
+
+
+_RUNTIME_PARAMETERS = {spec.name for spec in RUNTIME_PARAMETERS}
+_NOISE_PARAMETERS = [spec for spec in PARAMETERS if spec.name in
+                     {item.name for item in dataclasses.fields(NoiseParams)}]
+_DOUBLE_PARAMETERS = {spec.name for spec in PARAMETERS if spec.type_code == PARAMETER_DOUBLE}
+_SPECS = {spec.name: spec for spec in PARAMETERS}
 
 
 class VirtualRobotNode(Node):
@@ -161,10 +190,7 @@ class VirtualRobotNode(Node):
         self.robot = robot if robot is not None else self._build_robot()
         self._robot = self.robot
         self._declare_robot_parameters()
-        self._cmd_vel_stamped = bool(self.declare_parameter(
-            "cmd_vel_stamped", False,
-            _descriptor("subscribe /cmd_vel as geometry_msgs/TwistStamped (as Jazzy's "
-                        "navigation stack publishes) instead of Twist", read_only=True)).value)
+        self._cmd_vel_stamped = bool(_declare(self, parameter_spec("cmd_vel_stamped")))
 
         self._robot_publishers: dict[str, Any] = {}
         self._classes: dict[str, Any] = {}
@@ -216,20 +242,14 @@ class VirtualRobotNode(Node):
 
     def _build_robot(self) -> VirtualRobot:
         """The robot the start-up parameters describe (they are validated as declared)."""
-        params_file = str(self.declare_parameter(
-            "params_file", str(SHIPPED_PARAMS_FILE),
-            _descriptor("robot, LiDAR and noise parameter file (YAML)", read_only=True)).value)
-        world = str(self.declare_parameter(
-            "world", DEFAULT_WORLD,
-            _descriptor("world file, or a shipped world's name (empty, maze, corridor)",
-                        read_only=True)).value)
-        seed = int(self.declare_parameter(
-            "seed", 0, _descriptor("seed of the noise generator", read_only=True)).value)
+        params_file = str(_declare(self, parameter_spec("params_file"),
+                                   str(SHIPPED_PARAMS_FILE)))
+        world = str(_declare(self, parameter_spec("world")))
+        seed = int(_declare(self, parameter_spec("seed")))
         platform = load_params(params_file)
         noise = NoiseParams(**{
-            name: float(self.declare_parameter(name, float(getattr(platform.noise, name)),
-                                               _descriptor(text, read_only=True)).value)
-            for name, text in _NOISE_PARAMETERS.items()})
+            spec.name: float(_declare(self, spec, float(getattr(platform.noise, spec.name))))
+            for spec in _NOISE_PARAMETERS})
         sim = Simulation(load_world(world), platform.robot, seed=seed, lidar=platform.lidar,
                          noise=noise)
         return VirtualRobot(sim, clock=self._stamp_time)
@@ -238,16 +258,15 @@ class VirtualRobotNode(Node):
         """Declare the runtime parameters at their current values; overrides apply at once."""
         if not self.has_parameter("world"):  # a robot built elsewhere: describe it
             sim = self.robot.sim
-            self.declare_parameter("world", sim.world.source,
-                                   _descriptor("the world (read-only here)", read_only=True))
-            for name, text in _NOISE_PARAMETERS.items():
-                self.declare_parameter(name, float(getattr(sim.noise, name)),
-                                       _descriptor(text, read_only=True))
+            _declare(self, parameter_spec("world"), sim.world.source)
+            _declare(self, parameter_spec("seed"), sim.seed or 0)
+            for spec in _NOISE_PARAMETERS:
+                _declare(self, spec, float(getattr(sim.noise, spec.name)))
         parameters = self.robot.parameters
         current = self._access.call(lambda: {name: parameters.get(name)
-                                             for name in parameters.names()})
-        for spec in PARAMETERS:
-            self.declare_parameter(spec.name, current[spec.name], _descriptor(spec.description))
+                                             for name in _RUNTIME_PARAMETERS})
+        for spec in RUNTIME_PARAMETERS:
+            _declare(self, spec, current[spec.name])
 
     def _stamp_time(self) -> float:
         """Stamps: simulated time (ticks since start) with use_sim_time, else the wall clock."""
@@ -257,15 +276,15 @@ class VirtualRobotNode(Node):
 
     def _validate_parameters(self, parameters: list[Parameter[Any]]) -> SetParametersResult:
         """Refuse bad values with the reason (also for overrides given at start)."""
-        robot_values = {p.name: p.value for p in parameters if p.name in _ROBOT_PARAMETERS}
+        robot_values = {p.name: p.value for p in parameters if p.name in _RUNTIME_PARAMETERS}
         try:
             for p in parameters:
                 if p.name == "world":
                     load_world(str(p.value))
                 elif p.name == "params_file":
                     load_params(str(p.value))
-                elif p.name in _NOISE_PARAMETERS:
-                    NoiseParams(**{p.name: p.value})
+                elif p.name in _SPECS and p.name not in _RUNTIME_PARAMETERS:
+                    _SPECS[p.name].validate(p.value)
             if robot_values and self._robot is not None:
                 robot = self._robot
                 self._access.call(lambda: robot.parameters.check(robot_values))
@@ -278,7 +297,7 @@ class VirtualRobotNode(Node):
     def _apply_parameters(self, parameters: list[Parameter[Any]]) -> None:
         """Make validated runtime changes in the simulation (unless it already has them)."""
         robot = self._robot
-        values = {p.name: p.value for p in parameters if p.name in _ROBOT_PARAMETERS}
+        values = {p.name: p.value for p in parameters if p.name in _RUNTIME_PARAMETERS}
         if robot is None or not values:
             return
 
@@ -302,7 +321,7 @@ class VirtualRobotNode(Node):
     def _sync_parameters(self, names: list[str]) -> None:
         robot = self.robot
         current = self._access.call(lambda: {name: robot.parameters.get(name)
-                                             for name in names if name in _ROBOT_PARAMETERS})
+                                             for name in names if name in _RUNTIME_PARAMETERS})
         stale = [Parameter(name, value=value) for name, value in current.items()
                  if self.get_parameter(name).value != value]
         if stale:

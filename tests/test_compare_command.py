@@ -103,7 +103,7 @@ def test_heavier_robot_doubles_the_dynamic_rise_time(tmp_path: Path) -> None:
 @pytest.mark.parametrize(("override", "message"), [
     ("mas_kg=2.4", "--set: unknown key 'mas_kg'; did you mean 'mass_kg'?"),
     ("mass_kg=heavy", "--set mass_kg: expected a number, got 'heavy'"),
-    ("mass_kg=-1", "--set mass_kg: must be > 0, got -1.0"),
+    ("mass_kg=-1", "--set mass_kg: must be between 0.01 and 1000, got -1.0"),
     ("mass_kg=nan", "--set mass_kg: expected a finite number"),
     ("mass_kg", "--set 'mass_kg': expected NAME=VALUE"),
 ])

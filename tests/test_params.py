@@ -62,14 +62,14 @@ def test_partial_file_overrides_only_what_it_names(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("text", "expected"), [
-    ("robot:\n  mass_kg: -1\n", "robot.mass_kg: must be > 0, got -1"),
+    ("robot:\n  mass_kg: -1\n", "robot.mass_kg: must be between 0.01 and 1000, got -1"),
     ("robot:\n  mass_kg: .inf\n", "robot.mass_kg: expected a finite number"),
     ("robot:\n  mass: 2\n", "unknown key 'mass'; did you mean 'mass_kg'"),
     ("robots: {}\n", "unknown key 'robots'; did you mean 'robot'"),
     ("lidar:\n  num_rays: 0\n", "lidar.num_rays: must be a whole number"),
     ("lidar:\n  range_min_m: 4\n", "lidar.range_min_m: must be < range_max_m"),
     ("lidar:\n  no_return: nan\n", "lidar.no_return: must be one of range_max, inf"),
-    ("noise:\n  scan_sigma_m: -0.1\n", "noise.scan_sigma_m: must be >= 0"),
+    ("noise:\n  scan_sigma_m: -0.1\n", "noise.scan_sigma_m: must be between 0 and 1"),
     ("robot: [1, 2]\n", "robot: expected a mapping"),
     ("robot: {mass_kg: 1\n", "not valid YAML"),
 ])
