@@ -39,7 +39,8 @@ from ros_nodes.ros_interop import (
     to_dict,
     to_message,
 )
-from ros_nodes.rosbridge.bridge import Bridge, BridgeError
+from ros_nodes.rosbridge.bridge import Bridge
+from ros_nodes.rosbridge.errors import BridgeError
 from ros_nodes.virtual_robot import VirtualRobotNode
 from ros_nodes.virtual_robot_core import VirtualRobot
 
@@ -266,7 +267,7 @@ class RosRuntime:
     def start(self) -> None:
         """Spin the executor and relay the bridge's topics from now on."""
         self._thread.start()
-        self._bridge.attach_graph(self.relay)
+        self._bridge.graph.attach(self.relay)
 
     def _spin(self) -> None:
         try:
@@ -280,7 +281,7 @@ class RosRuntime:
 
     def stop(self, timeout_s: float = 5.0) -> None:
         """Detach from the bridge, stop the executor and destroy the nodes."""
-        self._bridge.attach_graph(None)
+        self._bridge.graph.attach(None)
         self.executor.shutdown(timeout_sec=timeout_s)
         self.robot_node.destroy_node()
         self.relay_node.destroy_node()

@@ -62,3 +62,18 @@ ROBOT_TOPICS = (CMD_VEL, ODOM, SCAN, TF, TF_STATIC, GROUND_TRUTH, WORLD)
 
 PUBLISHED_TOPICS = tuple(spec for spec in ROBOT_TOPICS if spec.direction == "out")
 """Topics only the simulator may publish."""
+
+NODE_NAME = "/virtual_robot"
+"""The robot node's name, as on the real robot and in the Docker stack."""
+
+RESET_SERVICE = "/reset_simulation"
+"""``std_srvs/srv/Empty``: back to spawn with odometry zeroed (as gazebo_ros offers it)."""
+
+PARAMETER_SERVICES = {
+    "get_parameters": "rcl_interfaces/srv/GetParameters",
+    "set_parameters": "rcl_interfaces/srv/SetParameters",
+    "list_parameters": "rcl_interfaces/srv/ListParameters",
+    "describe_parameters": "rcl_interfaces/srv/DescribeParameters",
+    "get_parameter_types": "rcl_interfaces/srv/GetParameterTypes",
+}
+"""The node's parameter services (``/virtual_robot/NAME``) and their types, as rclpy offers."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import signal
@@ -86,15 +87,28 @@ def stop_process(process: subprocess.Popen[str], output: list[str], signum: int,
     return process.returncode
 
 
+def limit_open_files(limit: int) -> None:
+    """Set this process's RLIMIT_NOFILE, soft and hard, to ``limit`` (a Popen preexec_fn)."""
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_NOFILE, (limit, limit))
+
+
 def start_server(extra_args: Sequence[str] = (), ws_port: int | None = None,
-                 http_port: int | None = None) -> ServerProcess:
-    """Launch ``websim serve`` (as ``python -m websim.cli``) and wait until it is healthy."""
+                 http_port: int | None = None,
+                 open_files: int | None = None) -> ServerProcess:
+    """Launch ``websim serve`` (as ``python -m websim.cli``) and wait until it is healthy.
+
+    ``open_files`` limits the server process to that many file descriptors (soft and hard).
+    """
     ws_port = ws_port or free_port()
     http_port = http_port or free_port()
     command = [sys.executable, "-m", "websim.cli", "serve", "--ws-port", str(ws_port),
                "--http-port", str(http_port), "--admin-token", ADMIN_TOKEN, *extra_args]
+    preexec = None if open_files is None else functools.partial(limit_open_files, open_files)
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                               text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                               text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                               preexec_fn=preexec)
     server = ServerProcess(ws_port, http_port, process)
 
     def healthy() -> bool:

@@ -16,14 +16,13 @@ import numpy as np
 import pytest
 
 from physics import LidarParams, Simulation, load_world
-from ros_nodes import access
 from ros_nodes.parameters import PARAMETER_DOUBLE, PARAMETER_STRING
 from ros_nodes.rosbridge.bridge import Bridge, Session
 from ros_nodes.rosbridge.encoding import MAX_NESTING
-from ros_nodes.rosbridge.limits import OriginPolicy, RateLimit
+from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy, RateLimit
 from ros_nodes.rosbridge.outbox import Outbox
+from ros_nodes.rosbridge.robot_endpoint import RobotEndpoint
 from ros_nodes.rosbridge.schema import OP_FIELDS
-from ros_nodes.rosbridge.services import add_robot_services
 from ros_nodes.virtual_robot_core import VirtualRobot
 
 
@@ -42,10 +41,8 @@ class Rig:
         self.clock = Clock()
         self.robot = VirtualRobot(Simulation(load_world("empty"), lidar=lidar, seed=0),
                                   clock=lambda: 1_700_000_000.25)
-        self.bridge = Bridge(self.robot.on_cmd_vel, clock=self.clock)
-        add_robot_services(self.bridge, self.robot)
-        for spec, msg in self.robot.latched():
-            self.bridge.publish(spec.name, msg, latch=True)
+        self.bridge = Bridge(clock=self.clock)
+        self.endpoint = RobotEndpoint(self.bridge, self.robot)
 
     def client(self, admin: bool = False) -> Session:
         session = Session("test-peer", admin, Outbox())
@@ -313,9 +310,9 @@ def test_clients_relay_topics_to_each_other(rig: Rig) -> None:
     rig.send(talker, {"op": "publish", "topic": "/chatter", "msg": {"data": "hi"}})
     assert rig.drain(listener) == [{"op": "publish", "topic": "/chatter",
                                     "msg": {"data": "hi"}}]
-    assert rig.bridge.topics()["/chatter"] == "std_msgs/msg/String"
+    assert rig.bridge.topic_types()["/chatter"] == "std_msgs/msg/String"
     rig.bridge.disconnect(talker)
-    assert "/chatter" not in rig.bridge.topics()
+    assert "/chatter" not in rig.bridge.topic_types()
 
 
 def test_latched_client_topic_reaches_late_subscribers(rig: Rig) -> None:
@@ -366,7 +363,8 @@ def test_set_and_get_parameters_with_admin(rig: Rig) -> None:
     assert values[1]["type"] == PARAMETER_STRING and values[1]["string_value"] == "kinematic"
     assert values[2]["type"] == 0
     bad = set_mass(rig, admin, -1.0)["values"]["results"][0]
-    assert bad["successful"] is False and "mass_kg: must be > 0, got -1.0" in bad["reason"]
+    assert bad["successful"] is False
+    assert "mass_kg: must be between 0.01 and 1000, got -1.0" in bad["reason"]
     assert rig.robot.sim.params.mass_kg == 2.4
 
 
@@ -422,7 +420,7 @@ def test_client_provided_service_round_trip(rig: Rig) -> None:
                         "values": {"sum": 3}, "result": True})
     assert rig.drain(caller) == [{"op": "service_response", "service": "/add",
                                   "values": {"sum": 3}, "result": True, "id": "mine"}]
-    assert rig.bridge.services()["/add"] == "example_interfaces/srv/AddTwoInts"
+    assert rig.bridge.services.types()["/add"] == "example_interfaces/srv/AddTwoInts"
 
 
 def test_hanging_client_service_times_out(rig: Rig) -> None:
@@ -433,10 +431,10 @@ def test_hanging_client_service_times_out(rig: Rig) -> None:
     rig.tick()
     assert topics_of(rig.drain(caller)) == ["/odom"], "other traffic is not blocked"
     rig.clock.now_s += 4.9
-    rig.bridge.expire_calls()
+    rig.bridge.services.expire()
     assert rig.drain(caller) == []
     rig.clock.now_s += 0.2
-    rig.bridge.expire_calls()
+    rig.bridge.services.expire()
     [reply] = rig.drain(caller)
     assert reply["result"] is False and "did not answer within 5 s" in reply["values"]
 
@@ -448,7 +446,7 @@ def test_provider_disconnect_fails_its_pending_calls(rig: Rig) -> None:
     rig.bridge.disconnect(provider)
     [reply] = rig.drain(caller)
     assert reply["result"] is False and "disconnected" in reply["values"]
-    assert "/s" not in rig.bridge.services()
+    assert "/s" not in rig.bridge.services.types()
 
 
 def test_disconnect_forgets_everything_of_the_client(rig: Rig) -> None:
@@ -457,12 +455,12 @@ def test_disconnect_forgets_everything_of_the_client(rig: Rig) -> None:
     rig.send(client, {"op": "advertise", "topic": "/mine", "type": "std_msgs/String"})
     rig.bridge.disconnect(client)
     assert client not in rig.bridge.sessions
-    assert rig.bridge._subscribers == {}
-    assert "/mine" not in rig.bridge.topics()
+    assert rig.bridge.topics.subscribed_topics() == []
+    assert "/mine" not in rig.bridge.topic_types()
 
 
 def test_reply_overflow_marks_the_outbox(rig: Rig) -> None:
-    session = Session("slow", False, Outbox(reply_limit=5))
+    session = Session("slow", False, Outbox(max_replies=5))
     rig.bridge.connect(session)
     for index in range(8):
         rig.send(session, {"op": "call_service", "service": "/rosapi/nodes", "id": str(index)})
@@ -502,9 +500,9 @@ def test_huge_array_is_relayed_within_the_bounded_queue(rig: Rig) -> None:
     rig.send(sender, {"op": "advertise", "topic": "/big", "type": "std_msgs/Float32MultiArray"})
     rig.send(reader, {"op": "subscribe", "topic": "/big"})
     for _ in range(20):
-        rig.send(sender, {"op": "publish", "topic": "/big", "msg": {"data": [1.5] * 100_000}})
+        rig.send(sender, {"op": "publish", "topic": "/big", "msg": {"data": [1.5] * 20_000}})
     assert len(reader.outbox) == 1, "a reader that does not read keeps only the newest"
-    assert len(rig.drain(reader)[0]["msg"]["data"]) == 100_000
+    assert len(rig.drain(reader)[0]["msg"]["data"]) == 20_000
     rig.tick(3)
     assert all(math.isfinite(v) for v in rig.robot.sim.ground_truth())
 
@@ -532,13 +530,13 @@ def test_access_denial_of_a_service_call_is_a_failed_response(rig: Rig) -> None:
 def test_one_client_cannot_grow_the_tables_without_bound(rig: Rig) -> None:
     client = rig.client()
     rig.send(client, {"op": "set_level", "level": "error"})
-    for index in range(access.MAX_SUBSCRIPTIONS + 5):
+    for index in range(ClientLimits().max_subscriptions + 5):
         rig.send(client, {"op": "subscribe", "topic": f"/t{index}"})
     rig.send(client, {"op": "subscribe", "topic": "/t0", "id": "again"})
-    assert len(client.subscriptions) == access.MAX_SUBSCRIPTIONS
+    assert len(client.subscriptions) == ClientLimits().max_subscriptions
     statuses = rig.drain(client)
     assert len(statuses) == 5
-    assert all(f"at most {access.MAX_SUBSCRIPTIONS} subscriptions" in s["msg"]
+    assert all(f"at most {ClientLimits().max_subscriptions} subscriptions" in s["msg"]
                for s in statuses)
 
 

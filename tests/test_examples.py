@@ -124,6 +124,7 @@ def test_scripts_fail_with_the_reason_when_nothing_listens() -> None:
 BROWSER_SKIP = skip_reason([ROSLIB])
 
 
+@pytest.mark.browser
 @pytest.mark.skipif(BROWSER_SKIP is not None, reason=BROWSER_SKIP or "")
 def test_roslibjs_page_drives_the_robot_in_chromium(server: ServerProcess) -> None:
     """The page as its comment says to use it: copied into web-interface/, served by websim

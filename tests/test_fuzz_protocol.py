@@ -1,10 +1,12 @@
 """Property test of the protocol layer: whatever arrives, the bridge answers and the robot runs.
 
 Hypothesis draws arbitrary JSON values, op-shaped dicts (every op of ``schema.OP_FIELDS`` with
-its fields filled by well- and ill-typed values), raw text and bytes, and feeds them from a
-student and an admin client into ``Bridge.handle`` between ticks. Nothing may raise, the
-simulation must keep stepping with a finite state, and every frame queued for a client must be
-strict JSON (no NaN) or CBOR. ``benchmarks/fuzz_protocol.py`` runs the same strategies longer.
+its fields filled by well- and ill-typed values: huge integers, any JSON type in any field,
+decoy name fields), raw text, bytes and CBOR-encoded binary frames, and feeds them from a
+student and an admin client into ``Bridge.handle`` between ticks. Nothing may raise, no fault
+may be recorded (an unexpected exception anywhere is a bug), the simulation must keep
+stepping with a finite state, and every frame queued for a client must be strict JSON (no
+NaN) or CBOR. ``benchmarks/fuzz_protocol.py`` runs the same strategies longer.
 """
 
 from __future__ import annotations
@@ -31,7 +33,12 @@ TYPES = st.sampled_from(["geometry_msgs/msg/Twist", "geometry_msgs/Twist", "std_
                          "nav_msgs/msg/Odometry", "std_srvs/srv/Empty", "not a type",
                          "rcl_interfaces/srv/SetParameters"]) | st.text(max_size=12)
 
-NUMBERS = st.floats(allow_nan=True, allow_infinity=True) | st.integers(-10**30, 10**30)
+HUGE_INTEGERS = st.sampled_from([10**400, -(10**400), 2**63, 2**64, -(2**63) - 1, 2**53 + 1,
+                                 10**308 * 10, 2**31])
+"""Integers JSON can carry but no field may hold: beyond float, int64, JavaScript range."""
+
+NUMBERS = (st.floats(allow_nan=True, allow_infinity=True) | st.integers(-10**30, 10**30)
+           | HUGE_INTEGERS)
 
 JSON = st.recursive(
     st.none() | st.booleans() | NUMBERS | st.text(max_size=8),
@@ -57,7 +64,9 @@ FIELD_VALUES: dict[str, st.SearchStrategy[Any]] = {
     "args": PARAMETERS | JSON, "values": JSON, "level": st.sampled_from(
         ["info", "warning", "error", "none", "loud"]),
     "compression": st.sampled_from(["none", "cbor", "png", "zip"]),
-    "throttle_rate": NUMBERS, "queue_length": st.integers(-5, 50),
+    "throttle_rate": NUMBERS, "queue_length": st.integers(-5, 150) | HUGE_INTEGERS,
+    "fragment_size": NUMBERS, "timeout": NUMBERS, "latch": st.booleans() | JSON,
+    "result": st.booleans() | JSON,
 }
 
 
@@ -69,16 +78,20 @@ def operation(draw: st.DrawFn) -> dict[str, Any]:
     for name in OP_FIELDS[op]:
         if draw(st.integers(0, 4)) == 0:
             continue
-        message[name] = draw(FIELD_VALUES.get(name, JSON) | JSON
-                             if draw(st.integers(0, 9)) == 0 else FIELD_VALUES.get(name, JSON))
+        confused = draw(st.integers(0, 3)) == 0  # type confusion: any JSON in any field
+        message[name] = draw(JSON if confused else FIELD_VALUES.get(name, JSON))
     if draw(st.booleans()):
-        message["id"] = draw(st.text(max_size=6) | st.integers() | JSON)
+        message["id"] = draw(st.text(max_size=6) | st.integers() | HUGE_INTEGERS | JSON)
+    if draw(st.integers(0, 4)) == 0:  # a decoy name field the op does not use
+        message[draw(st.sampled_from(["topic", "service"]))] = draw(NAMES)
     return message
 
 
 FRAMES = (operation().map(json.dumps) | JSON.map(json.dumps)
-          | st.text(max_size=40) | st.binary(max_size=40))
-"""One incoming WebSocket message: text (JSON or not) or binary."""
+          | st.text(max_size=40) | st.binary(max_size=40)
+          | operation().map(cbor2.dumps) | JSON.map(cbor2.dumps))
+"""One incoming WebSocket message: text (JSON or not) or binary (CBOR-encoded ops, CBOR
+values, arbitrary bytes)."""
 
 SESSIONS = st.lists(st.tuples(st.booleans(), FRAMES), min_size=1, max_size=12)
 """A sequence of (from the admin client?, frame)."""
@@ -108,6 +121,7 @@ def run_session(frames: list[tuple[bool, str | bytes]]) -> None:
                     assert isinstance(json.loads(out, parse_constant=_strict), dict)
     rig.tick()
     assert rig.robot.sim.time_s > 0
+    assert not rig.bridge.faults.degraded, rig.bridge.faults.report()
 
 
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -15,7 +15,7 @@ import pytest
 from physics import ConfigError, RobotParams, Simulation, load_world
 from ros_nodes.rosbridge.bridge import Bridge, BridgeError, Session
 from ros_nodes.rosbridge.outbox import Outbox
-from ros_nodes.rosbridge.services import add_robot_services
+from ros_nodes.rosbridge.robot_endpoint import RobotEndpoint
 from ros_nodes.virtual_robot_core import VirtualRobot
 
 TWIST = {"linear": {"x": 0.3, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
@@ -58,10 +58,10 @@ class RecordingGraph:
 class Rig:
     def __init__(self, graph: RecordingGraph | None = None) -> None:
         self.robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
-        self.bridge = Bridge(self.robot.on_cmd_vel)
-        add_robot_services(self.bridge, self.robot)
+        self.bridge = Bridge()
+        RobotEndpoint(self.bridge, self.robot)
         self.graph = graph or RecordingGraph()
-        self.bridge.attach_graph(self.graph)
+        self.bridge.graph.attach(self.graph)
 
     def client(self) -> Session:
         session = Session("test-peer", False, Outbox())
@@ -95,7 +95,7 @@ def test_subscribing_a_graph_topic_subscribes_once_and_relays_its_messages() -> 
     assert rig.graph.calls[-1][0] == "subscribe"
     rig.bridge.disconnect(second)
     assert rig.graph.calls[-1] == ("unsubscribe", "/chatter")
-    assert "/chatter" in rig.bridge.topics()
+    assert "/chatter" in rig.bridge.topic_types()
 
 
 def test_robot_topics_never_come_from_the_graph() -> None:
@@ -158,7 +158,7 @@ def test_check_validates_without_changing_anything() -> None:
     assert params.check({"mass_kg": 2, "mode": "dynamic", "cmd_vel_timeout_s": 1}) == {
         "mass_kg": 2.0, "mode": "dynamic", "cmd_vel_timeout_s": 1.0}
     assert (robot.sim.params.mass_kg, robot.sim.mode) == (RobotParams().mass_kg, "kinematic")
-    for values, reason in (({"mass_kg": -1.0}, "mass_kg: must be > 0"),
+    for values, reason in (({"mass_kg": -1.0}, "mass_kg: must be between 0.01 and 1000"),
                            ({"cmd_vel_timeout_s": -0.5}, "cmd_vel_timeout_s"),
                            ({"mode": "flying"}, "must be one of kinematic, dynamic"),
                            ({"mass": 1.0}, "mass: no such parameter")):

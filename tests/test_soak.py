@@ -13,6 +13,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 PROJECT_DIR = Path(__file__).resolve().parent.parent
 CLIENTS = 40
 SOAK_S = 60
@@ -20,6 +22,7 @@ WINDOW_S = 20
 RSS_GROWTH_LIMIT_MB = 10.0
 
 
+@pytest.mark.slow
 def test_forty_clients_for_a_minute_lose_nothing_and_grow_no_memory() -> None:
     completed = subprocess.run(
         [sys.executable, "benchmarks/load.py", "--clients", str(CLIENTS), "--soak", str(SOAK_S),

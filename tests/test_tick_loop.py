@@ -15,19 +15,21 @@ from typing import Any
 from physics import Simulation, load_world
 from ros_nodes.rosbridge.bridge import Session
 from ros_nodes.rosbridge.outbox import Outbox
-from ros_nodes.rosbridge.server import SHED_SCANS_AFTER_S, SimServer
+from ros_nodes.rosbridge.robot_host import SHED_SCANS_AFTER_S
+from ros_nodes.rosbridge.schema import MAX_QUEUE_LENGTH
+from ros_nodes.rosbridge.server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
 
 TICKS = 40
 
 
 def subscribed_client(server: SimServer) -> Session:
-    """A session on /odom and /scan that keeps every frame (queue_length > the run)."""
+    """A session on /odom and /scan that keeps every frame (40 /odom, 20 /scan: < 100)."""
     session = Session("test-peer", False, Outbox())
     server.bridge.connect(session)
     for topic in ("/odom", "/scan"):
         server.bridge.handle(session, json.dumps(
-            {"op": "subscribe", "topic": topic, "queue_length": 10 * TICKS}))
+            {"op": "subscribe", "topic": topic, "queue_length": MAX_QUEUE_LENGTH}))
     return session
 
 

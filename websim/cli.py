@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from physics import MODES, ConfigError, Simulation, load_params, load_world
 from physics.params import SHIPPED_PARAMS_FILE
 from physics.world import WORLDS_DIR
+from ros_nodes.robot_description import robot_json
 from ros_nodes.virtual_robot_core import VirtualRobot
 from websim import compare_command
 from websim import serve as serve_command
@@ -47,6 +48,16 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sim_arguments(compare, mode=False)
     compare_command.add_arguments(compare)
     compare.set_defaults(run=compare_command.run)
+
+    describe = commands.add_parser(
+        "robot-json", help="print the robot.json the web page reads (limits, topics, params)",
+        description="Print the robot description the web page reads: speed limits, footprint, "
+                    "topic names and types, services and the parameter table. websim serve "
+                    "serves it live; web-interface/robot.json is this output for the shipped "
+                    "parameters (the Docker stack's nginx serves that file).")
+    describe.add_argument("--params", default=str(SHIPPED_PARAMS_FILE),
+                          help="robot parameter file (default: config/pi4b_params.yaml)")
+    describe.set_defaults(run=_run_robot_json)
     return parser
 
 
@@ -79,6 +90,12 @@ def _run_demo(args: argparse.Namespace) -> int:
             odom = sim.odometry()
             print(f"{sim.time_s:6.2f}  {odom.x:8.4f}  {odom.y:8.4f}  {odom.theta:14.4f}  "
                   f"{odom.v:6.3f}  {odom.omega:9.3f}")
+    return 0
+
+
+def _run_robot_json(args: argparse.Namespace) -> int:
+    platform = load_params(args.params)
+    sys.stdout.write(robot_json(platform.robot, platform.lidar))
     return 0
 
 

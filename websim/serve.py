@@ -20,10 +20,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from physics.params import PROJECT_DIR
-from ros_nodes.rosbridge.limits import DEFAULT_MAX_RATE, OriginPolicy
-from ros_nodes.rosbridge.server import MAX_FRAME_BYTES, SimServer, start_websocket
+from ros_nodes.robot_description import robot_json
+from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy
+from ros_nodes.rosbridge.server import SimServer, start_websocket
 from ros_nodes.virtual_robot_core import VirtualRobot
-from websim.http_static import start_http
+from websim.http_server import start_http
 
 if TYPE_CHECKING:  # rclpy is imported only with --ros
     from ros_nodes.ros_graph import RosRuntime
@@ -44,15 +45,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="web interface port (default 8080)")
     parser.add_argument("--admin-token", default=None,
                         help="secret for admin rights (default: random, printed at start)")
-    parser.add_argument("--max-rate", type=_positive(float), default=DEFAULT_MAX_RATE,
+    defaults = ClientLimits()
+    parser.add_argument("--max-rate", type=_positive(float), default=defaults.max_rate,
                         metavar="N",
                         help="messages/s one client may send before it is disconnected "
-                             f"(close 1008; default {DEFAULT_MAX_RATE:g}; a message counts "
+                             f"(close 1008; default {defaults.max_rate:g}; a message counts "
                              "once per started 16 KiB)")
-    parser.add_argument("--max-frame-bytes", type=_positive(int), default=MAX_FRAME_BYTES,
-                        metavar="BYTES",
+    parser.add_argument("--max-frame-bytes", type=_positive(int),
+                        default=defaults.max_frame_bytes, metavar="BYTES",
                         help="largest incoming WebSocket message; larger ones close the "
-                             f"connection (1009; default {MAX_FRAME_BYTES})")
+                             f"connection (1009; default {defaults.max_frame_bytes})")
+    parser.add_argument("--max-queued-bytes", type=_positive(int),
+                        default=defaults.max_queued_bytes, metavar="BYTES",
+                        help="most bytes waiting to be sent to one client; a client that lets "
+                             "more pile up is not reading and is closed (1008; default "
+                             f"{defaults.max_queued_bytes})")
+    parser.add_argument("--max-clients", type=_positive(int), default=defaults.max_clients,
+                        metavar="N",
+                        help="WebSocket clients served at once; more are refused with HTTP "
+                             f"503 (default {defaults.max_clients})")
     parser.add_argument("--allow-origin", action="append", default=[], metavar="URL",
                         help="also accept browser pages from this origin (e.g. "
                              "http://robot.example:8080); repeatable; '*' accepts any page. "
@@ -89,14 +100,17 @@ async def serve_forever(args: argparse.Namespace, robot: VirtualRobot) -> int:
     """Run until SIGINT or SIGTERM; returns the exit code."""
     token = args.admin_token or secrets.token_urlsafe(16)
     origins = OriginPolicy.default(args.host, args.http_port, args.allow_origin)
-    server = SimServer(robot, token, max_rate=args.max_rate, origins=origins)
+    limits = ClientLimits(max_rate=args.max_rate, max_frame_bytes=args.max_frame_bytes,
+                          max_queued_bytes=args.max_queued_bytes, max_clients=args.max_clients)
+    server = SimServer(robot, token, limits=limits, origins=origins)
     try:
-        websocket = await start_websocket(server, args.host, args.ws_port,
-                                          args.max_frame_bytes)
+        websocket = await start_websocket(server, args.host, args.ws_port)
     except OSError as error:
         return _port_error("WebSocket", args.host, args.ws_port, error)
     try:
-        http = start_http(args.host, args.http_port, args.web_dir, server.health)
+        http = await start_http(
+            args.host, args.http_port, args.web_dir, server.health,
+            lambda: robot_json(robot.sim.params, robot.sim.lidar.params))
     except OSError as error:
         websocket.close()
         return _port_error("HTTP", args.host, args.http_port, error)
@@ -110,8 +124,7 @@ async def serve_forever(args: argparse.Namespace, robot: VirtualRobot) -> int:
         except RuntimeError as error:
             print(f"websim: error: {error}", file=sys.stderr)
             websocket.close()
-            http.shutdown()
-            http.server_close()
+            await http.close()
             return 1
     for signum in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(signum, stop.set)
@@ -142,8 +155,7 @@ async def serve_forever(args: argparse.Namespace, robot: VirtualRobot) -> int:
         ros.stop()
     websocket.close()
     await websocket.wait_closed()
-    http.shutdown()
-    http.server_close()
+    await http.close()
     print("websim: stopped", flush=True)
     return 0
 

@@ -1,11 +1,13 @@
-"""Per-connection limits of the embedded server: message rate and WebSocket origin.
+"""Per-connection limits of the embedded server: what a client may hold, send and cost.
 
-No I/O here: the server asks ``RateLimit.allow`` for every frame and ``OriginPolicy.allows``
-at every handshake, and closes or refuses the connection itself.
+``ClientLimits`` is the one definition of every bound (the README's limits table); the token
+buckets enforce the rates; ``OriginPolicy`` decides which web pages may connect. No I/O here:
+the server and the bridge ask, and close or refuse themselves.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Iterable
@@ -21,8 +23,109 @@ BYTES_PER_MESSAGE = 16 << 10
 cannot keep the server parsing megabytes of JSON at the full message rate."""
 
 
+@dataclass(frozen=True)
+class ClientLimits:
+    """Everything one client can make the server hold or do, bounded; one definition each.
+
+    The README's limits table lists these. Counts are checked where a message is validated;
+    byte and time budgets where frames are queued and handled.
+
+    Attributes:
+        max_rate: messages/s a client may send (token bucket, one second of burst); beyond
+            it the connection closes (1008).
+        max_frame_bytes: largest incoming WebSocket message; larger ones close it (1009).
+        max_queued_bytes: all frames waiting to be sent to one client (topic frames and
+            replies); beyond it the client is closed (1008): it is not reading.
+        max_queue_length: largest ``queue_length`` a subscription may ask for.
+        max_ids_per_topic: subscribe ids one client may hold on one topic.
+        max_subscriptions: topics one client may subscribe to at once.
+        max_advertised: topics one client may advertise at once.
+        max_services: services one client may offer at once.
+        max_latched_bytes: largest message a client may publish with ``latch: true``.
+        relay_bytes_per_s: bytes/s of messages one client may have relayed to others (one
+            second of burst); messages beyond it are dropped with an error to the sender.
+        handling_share: fraction of one core the server spends on one client's input,
+            sustained; a client over it is read more slowly (its socket backs up).
+        handling_burst_s: handling time a client may use at once before it is slowed (s).
+        stall_timeout_s: a client whose socket accepts nothing for this long while frames
+            wait is closed (1008) (s).
+        close_timeout_s: how long a close handshake may take before the connection is
+            aborted (s).
+        max_replies: replies (service responses, statuses) that may wait at once.
+        max_clients: connections one robot serves at once; beyond it the handshake is
+            refused (HTTP 503), so sockets are bounded whatever the file limit.
+    """
+
+    max_rate: float = DEFAULT_MAX_RATE
+    max_frame_bytes: int = 1 << 20
+    max_queued_bytes: int = 4 << 20
+    max_queue_length: int = 100
+    max_ids_per_topic: int = 16
+    max_subscriptions: int = 64
+    max_advertised: int = 32
+    max_services: int = 16
+    max_latched_bytes: int = 64 << 10
+    relay_bytes_per_s: int = 256 << 10
+    handling_share: float = 0.05
+    handling_burst_s: float = 0.2
+    stall_timeout_s: float = 10.0
+    close_timeout_s: float = 3.0
+    max_replies: int = 1000
+    max_clients: int = 500
+
+    def __post_init__(self) -> None:
+        for item in dataclasses.fields(self):
+            value = getattr(self, item.name)
+            if isinstance(value, bool) or not (isinstance(value, (int, float))
+                                               and math.isfinite(value) and value > 0):
+                raise ValueError(f"{item.name} must be a positive number, got {value!r}")
+
+
+class TokenBucket:
+    """``rate`` units per second sustained, at most ``burst`` at once.
+
+    Args:
+        rate: units refilled per second (> 0).
+        burst: the bucket's size (> 0).
+        clock: monotonic clock (s).
+    """
+
+    def __init__(self, rate: float, burst: float,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        if not (math.isfinite(rate) and rate > 0 and math.isfinite(burst) and burst > 0):
+            raise ValueError(f"rate and burst must be positive, got {rate}, {burst}")
+        self.rate = rate
+        self.burst = burst
+        self._clock = clock
+        self._tokens = burst
+        self._last_s = clock()
+
+    def _refill(self) -> float:
+        now = self._clock()
+        self._tokens = min(self.burst, self._tokens + (now - self._last_s) * self.rate)
+        self._last_s = now
+        return self._tokens
+
+    def take(self, amount: float) -> bool:
+        """Take ``amount`` if the bucket holds it; False (and nothing taken) if not."""
+        if self._refill() < amount:
+            return False
+        self._tokens -= amount
+        return True
+
+    def charge(self, amount: float) -> None:
+        """Take ``amount`` whatever the bucket holds (it may go negative: a debt)."""
+        self._refill()
+        self._tokens -= amount
+
+    def wait_s(self) -> float:
+        """How long until the bucket is no longer in debt (0: now)."""
+        tokens = self._refill()
+        return 0.0 if tokens >= 0 else -tokens / self.rate
+
+
 class RateLimit:
-    """A token bucket: ``rate`` messages per second sustained, bursts of up to ``rate``.
+    """A client's message rate: ``rate`` messages per second sustained, bursts of ``rate``.
 
     Args:
         rate: messages per second (> 0).
@@ -34,9 +137,7 @@ class RateLimit:
         if not (math.isfinite(rate) and rate > 0):
             raise ValueError(f"rate must be a positive number of messages/s, got {rate}")
         self.rate = rate
-        self._clock = clock
-        self._tokens = rate
-        self._last_s = clock()
+        self._bucket = TokenBucket(rate, rate, clock)
 
     @staticmethod
     def cost(frame_bytes: int) -> int:
@@ -45,14 +146,7 @@ class RateLimit:
 
     def allow(self, frame_bytes: int = 0) -> bool:
         """Take a frame's cost from the bucket; False if the client exceeded the rate."""
-        now = self._clock()
-        self._tokens = min(self.rate, self._tokens + (now - self._last_s) * self.rate)
-        self._last_s = now
-        cost = min(self.cost(frame_bytes), self.rate)
-        if self._tokens < cost:
-            return False
-        self._tokens -= cost
-        return True
+        return self._bucket.take(min(self.cost(frame_bytes), self.rate))
 
     def reason(self) -> str:
         """The close reason sent to a client that exceeded the rate."""

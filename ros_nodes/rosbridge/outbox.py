@@ -3,8 +3,9 @@
 There is no backpressure in a broadcast: a client that reads slowly must not stall the tick or
 the other clients, nor grow without bound. Each subscribed topic keeps at most its
 ``queue_length`` newest frames (older ones are dropped, as rosbridge's ``queue_length``
-promises); replies (service responses, statuses) are never dropped, but a client that lets
-more than ``reply_limit`` of them pile up is marked ``overflowed``, and the server closes it.
+promises); replies (service responses, statuses) are never dropped. Everything waiting is
+counted in bytes: past ``max_bytes``, or past ``max_replies`` replies, the outbox is marked
+``overflowed`` with the reason, and the server closes the client (it is not reading).
 """
 
 from __future__ import annotations
@@ -21,58 +22,83 @@ class Outbox:
     """Frames waiting to be sent to one client.
 
     Args:
-        reply_limit: most replies that may wait at once.
+        max_bytes: most bytes (characters of text frames) that may wait at once.
+        max_replies: most replies that may wait at once.
         wake: called whenever a frame is added (the writer task's event).
     """
 
-    def __init__(self, reply_limit: int = 1000, wake: Callable[[], None] | None = None) -> None:
+    def __init__(self, max_bytes: int = 4 << 20, max_replies: int = 1000,
+                 wake: Callable[[], None] | None = None) -> None:
         self._replies: deque[Frame] = deque()
         self._topics: dict[str, deque[tuple[int, Frame]]] = {}
         self._sequence = itertools.count()
-        self._reply_limit = reply_limit
+        self._max_bytes = max_bytes
+        self._max_replies = max_replies
         self._wake = wake
+        self.queued_bytes = 0
+        """Bytes of every frame waiting."""
         self.dropped = 0
         """Topic frames dropped because a newer one replaced them."""
-        self.overflowed = False
-        """True once a reply found ``reply_limit`` replies waiting: the client is not reading."""
+        self.overflowed: str | None = None
+        """Why the client must be closed (it let too much pile up), or None."""
 
     def __len__(self) -> int:
         return len(self._replies) + sum(len(queue) for queue in self._topics.values())
 
     def put_reply(self, frame: Frame) -> None:
-        """Queue a reply; past ``reply_limit`` waiting replies, mark the outbox overflowed."""
-        if len(self._replies) >= self._reply_limit:
-            self.overflowed = True
-        else:
-            self._replies.append(frame)
-        self._notify()
+        """Queue a reply; past the reply or byte budget, mark the outbox overflowed."""
+        if len(self._replies) >= self._max_replies:
+            self._overflow(f"{self._max_replies} replies unread")
+            return
+        self._replies.append(frame)
+        self._grow(len(frame))
 
     def put_topic(self, topic: str, frame: Frame, queue_length: int) -> None:
         """Queue a topic frame, keeping the newest ``max(1, queue_length)`` for ``topic``."""
         queue = self._topics.get(topic)
         limit = max(1, queue_length)
         if queue is None or queue.maxlen != limit:
-            queue = deque(queue or (), maxlen=limit)
+            old = list(queue or ())
+            kept = old[-limit:]
+            self.queued_bytes -= sum(len(f) for _, f in old[:len(old) - len(kept)])
+            queue = deque(kept, maxlen=limit)
             self._topics[topic] = queue
         if len(queue) == limit:
             self.dropped += 1
+            self.queued_bytes -= len(queue[0][1])
         queue.append((next(self._sequence), frame))
-        self._notify()
+        self._grow(len(frame))
 
     def discard_topic(self, topic: str) -> None:
         """Forget frames of a topic the client unsubscribed from."""
-        self._topics.pop(topic, None)
+        queue = self._topics.pop(topic, None)
+        if queue:
+            self.queued_bytes -= sum(len(frame) for _, frame in queue)
 
     def pop(self) -> Frame | None:
         """The next frame to send: replies first, then topic frames oldest first."""
         if self._replies:
-            return self._replies.popleft()
-        oldest: deque[tuple[int, Frame]] | None = None
-        for queue in self._topics.values():
-            if queue and (oldest is None or queue[0][0] < oldest[0][0]):
-                oldest = queue
-        return None if oldest is None else oldest.popleft()[1]
+            frame = self._replies.popleft()
+        else:
+            oldest: deque[tuple[int, Frame]] | None = None
+            for queue in self._topics.values():
+                if queue and (oldest is None or queue[0][0] < oldest[0][0]):
+                    oldest = queue
+            if oldest is None:
+                return None
+            frame = oldest.popleft()[1]
+        self.queued_bytes -= len(frame)
+        return frame
 
-    def _notify(self) -> None:
+    def _grow(self, size: int) -> None:
+        self.queued_bytes += size
+        if self.queued_bytes > self._max_bytes:
+            self._overflow(f"more than {self._max_bytes} bytes waiting to be sent")
+        if self._wake is not None:
+            self._wake()
+
+    def _overflow(self, reason: str) -> None:
+        if self.overflowed is None:
+            self.overflowed = f"send queue overflow: {reason} (the client is not reading)"
         if self._wake is not None:
             self._wake()

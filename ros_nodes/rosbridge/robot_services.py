@@ -17,16 +17,20 @@ from typing import Any
 
 from physics import ConfigError
 from ros_nodes.parameters import (
+    PARAMETER_DOUBLE,
+    PARAMETER_INTEGER,
     PARAMETER_NOT_SET,
     RobotParameters,
     parameter_value_msg,
+    shorten_value,
     value_from_parameter_value,
 )
-from ros_nodes.rosbridge.bridge import Bridge, ServiceError, Session
+from ros_nodes.rosbridge.bridge import Bridge
+from ros_nodes.rosbridge.encoding import parse_json
+from ros_nodes.rosbridge.errors import ServiceError
+from ros_nodes.rosbridge.session import Session
+from ros_nodes.topics import NODE_NAME, PARAMETER_SERVICES, RESET_SERVICE
 from ros_nodes.virtual_robot_core import VirtualRobot
-
-NODE_NAME = "/virtual_robot"
-"""The robot node's name, as on the real robot and in the Docker stack."""
 
 OTHER_NODES = ("/rosbridge_websocket", "/rosapi")
 """Nodes a real rosbridge deployment shows next to the robot."""
@@ -43,7 +47,8 @@ def require_admin(session: Session, action: str) -> None:
 def _names(args: Mapping[str, Any], field: str = "names") -> list[str]:
     names = args.get(field, [])
     if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
-        raise ServiceError(f"{field}: expected a list of parameter names, got {names!r}")
+        raise ServiceError(f"{field}: expected a list of parameter names, got "
+                           f"{shorten_value(names)}")
     return names
 
 
@@ -86,11 +91,20 @@ def add_robot_services(bridge: Bridge, robot: VirtualRobot) -> None:
         for name in _names(args):
             known = name in params.names()
             spec = RobotParameters.spec(name) if known else None
+            bounds = [] if spec is None or spec.minimum is None else [
+                {"from_value": spec.minimum, "to_value": spec.maximum, "step": 0}]
+            description = "" if spec is None else \
+                f"{spec.description}{f' ({spec.unit})' if spec.unit else ''}"
             descriptors.append({
                 "name": name, "type": spec.type_code if spec else PARAMETER_NOT_SET,
-                "description": spec.description if spec else "", "additional_constraints": "",
-                "read_only": False, "dynamic_typing": False,
-                "floating_point_range": [], "integer_range": []})
+                "description": description,
+                "additional_constraints": f"one of {spec.range_text()}"
+                if spec is not None and spec.choices else "",
+                "read_only": spec is not None and not spec.runtime, "dynamic_typing": False,
+                "floating_point_range": bounds
+                if spec is not None and spec.type_code == PARAMETER_DOUBLE else [],
+                "integer_range": bounds
+                if spec is not None and spec.type_code == PARAMETER_INTEGER else []})
         return {"descriptors": descriptors}
 
     def get_parameter_types(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
@@ -101,16 +115,12 @@ def add_robot_services(bridge: Bridge, robot: VirtualRobot) -> None:
         robot.reset()
         return {}
 
-    for name, type_name, handler in (
-            ("get_parameters", "rcl_interfaces/srv/GetParameters", get_parameters),
-            ("set_parameters", "rcl_interfaces/srv/SetParameters", set_parameters),
-            ("list_parameters", "rcl_interfaces/srv/ListParameters", list_parameters),
-            ("describe_parameters", "rcl_interfaces/srv/DescribeParameters",
-             describe_parameters),
-            ("get_parameter_types", "rcl_interfaces/srv/GetParameterTypes",
-             get_parameter_types)):
-        bridge.add_service(f"{prefix}/{name}", type_name, handler)
-    bridge.add_service("/reset_simulation", "std_srvs/srv/Empty", reset)
+    handlers = {"get_parameters": get_parameters, "set_parameters": set_parameters,
+                "list_parameters": list_parameters, "describe_parameters": describe_parameters,
+                "get_parameter_types": get_parameter_types}
+    for name, type_name in PARAMETER_SERVICES.items():
+        bridge.services.add(f"{prefix}/{name}", type_name, handlers[name])
+    bridge.services.add(RESET_SERVICE, "std_srvs/srv/Empty", reset)
     _add_rosapi(bridge, params)
 
 
@@ -126,17 +136,17 @@ def _split_param_name(name: Any) -> str:
 
 def _add_rosapi(bridge: Bridge, params: RobotParameters) -> None:
     def topics(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
-        known = sorted(bridge.topics().items())
+        known = sorted(bridge.topic_types().items())
         return {"topics": [name for name, _ in known], "types": [t for _, t in known]}
 
     def topic_type(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
-        return {"type": bridge.topics().get(str(args.get("topic", "")), "")}
+        return {"type": bridge.topic_types().get(str(args.get("topic", "")), "")}
 
     def services(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
-        return {"services": sorted(bridge.services())}
+        return {"services": sorted(bridge.services.types())}
 
     def service_type(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
-        return {"type": bridge.services().get(str(args.get("service", "")), "")}
+        return {"type": bridge.services.types().get(str(args.get("service", "")), "")}
 
     def nodes(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
         return {"nodes": [NODE_NAME, *OTHER_NODES]}
@@ -157,10 +167,10 @@ def _add_rosapi(bridge: Bridge, params: RobotParameters) -> None:
         require_admin(session, "set_param")
         param = _split_param_name(args.get("name"))
         try:
-            value = json.loads(str(args.get("value")))
-        except ValueError:
-            raise ServiceError(f"value: expected a JSON string, got {args.get('value')!r}") \
-                from None
+            value = parse_json(str(args.get("value")))
+        except ValueError as error:
+            raise ServiceError(f"value: expected a JSON string, got "
+                               f"{shorten_value(args.get('value'))}: {error}") from None
         params.set(param, value)
         return {}
 
@@ -169,4 +179,4 @@ def _add_rosapi(bridge: Bridge, params: RobotParameters) -> None:
                           ("nodes", nodes), ("get_param_names", get_param_names),
                           ("get_param", get_param), ("set_param", set_param)):
         type_name = "rosapi_msgs/srv/" + "".join(p.title() for p in name.split("_"))
-        bridge.add_service(f"/rosapi/{name}", type_name, handler)
+        bridge.services.add(f"/rosapi/{name}", type_name, handler)

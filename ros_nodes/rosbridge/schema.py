@@ -1,54 +1,42 @@
-"""The rosbridge v2 operations this server understands, and the fields of each.
+"""The rosbridge v2 operations this server understands: each op's fields, types and ranges.
 
-One table, used by the dispatcher to validate every incoming message and by the tests. Fields
-not listed are accepted and ignored, as rosbridge does (clients send extras such as
-``fragment_size``).
+One table, used by the dispatcher to validate every incoming message before any handler sees
+it, and by the tests and the fuzzer. Every number has a documented range and every string a
+length bound, so nothing unvalidated reaches a queue, a timer or the physics. Fields not
+listed are accepted and ignored, as rosbridge does (clients send extras).
+
+Each op that names a topic or service names it in one field (``NAME_FIELDS``): that field,
+and only that one, is resolved as ROS resolves names and checked by the allow-list, whatever
+other fields the message has.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-Id = (str, int)
-"""roslibjs sends string ids ("subscribe:/odom:1"); other clients send numbers."""
+MAX_ID_CHARS = 256
+"""Longest string id; ids are echoed back in replies."""
 
+MAX_ID_INTEGER = 2**53
+"""Largest integer id magnitude: what JavaScript numbers hold exactly."""
 
-@dataclass(frozen=True)
-class Field:
-    """One field of an operation.
+MAX_THROTTLE_MS = 3_600_000
+"""Largest ``throttle_rate`` (one hour, in ms)."""
 
-    Attributes:
-        types: accepted Python types after JSON decoding.
-        required: whether the operation is invalid without it.
-    """
+MAX_QUEUE_LENGTH = 100
+"""Largest ``queue_length``; see ``limits.ClientLimits.max_queue_length``."""
 
-    types: tuple[type, ...]
-    required: bool = False
+MAX_TYPE_CHARS = 256
+"""Longest type name (``pkg/msg/Type``)."""
 
+MAX_NAME_CHARS = 256
+"""Longest topic or service name."""
 
-OP_FIELDS: Mapping[str, Mapping[str, Field]] = {
-    "advertise": {"topic": Field((str,), True), "type": Field((str,), True),
-                  "id": Field(Id), "latch": Field((bool,)), "queue_size": Field((int,))},
-    "unadvertise": {"topic": Field((str,), True), "id": Field(Id)},
-    "publish": {"topic": Field((str,), True), "msg": Field((dict,), True), "id": Field(Id),
-                "latch": Field((bool,))},
-    "subscribe": {"topic": Field((str,), True), "type": Field((str,)), "id": Field(Id),
-                  "throttle_rate": Field((int, float)), "queue_length": Field((int,)),
-                  "fragment_size": Field((int,)), "compression": Field((str,))},
-    "unsubscribe": {"topic": Field((str,), True), "id": Field(Id)},
-    "call_service": {"service": Field((str,), True), "args": Field((dict, list)),
-                     "id": Field(Id), "type": Field((str,)), "fragment_size": Field((int,)),
-                     "compression": Field((str,)), "timeout": Field((int, float))},
-    "service_response": {"service": Field((str,), True), "id": Field(Id),
-                         "values": Field((dict, list, str)), "result": Field((bool,), True)},
-    "advertise_service": {"service": Field((str,), True), "type": Field((str,), True)},
-    "unadvertise_service": {"service": Field((str,), True)},
-    "set_level": {"level": Field((str,), True), "id": Field(Id)},
-    "auth": {},
-}
-"""Every operation and its fields."""
+MAX_FRAGMENT_SIZE = 2**31 - 1
+MAX_TIMEOUT_S = 3600.0
 
 STATUS_LEVELS = ("info", "warning", "error", "none")
 """``set_level`` levels, least severe first; a client hears statuses at or above its level."""
@@ -57,33 +45,148 @@ COMPRESSIONS = ("none", "cbor", "png", "cbor-raw")
 """Compressions clients may ask for; ``png`` and ``cbor-raw`` are served as ``none``."""
 
 
+@dataclass(frozen=True)
+class Field:
+    """One field of an operation.
+
+    Attributes:
+        types: accepted Python types after JSON decoding (``bool`` only where listed).
+        required: whether the operation is invalid without it.
+        minimum: smallest accepted number (numbers only).
+        maximum: largest accepted number, or for strings the most characters.
+        choices: the accepted strings; empty: any (up to ``maximum`` characters).
+    """
+
+    types: tuple[type, ...]
+    required: bool = False
+    minimum: float | None = None
+    maximum: float | None = None
+    choices: tuple[str, ...] = ()
+
+
+ID = Field((str, int), maximum=MAX_ID_CHARS)
+"""roslibjs sends string ids ("subscribe:/odom:1"); other clients send numbers."""
+
+TOPIC = Field((str,), True, maximum=MAX_NAME_CHARS)
+SERVICE = Field((str,), True, maximum=MAX_NAME_CHARS)
+TYPE = Field((str,), maximum=MAX_TYPE_CHARS)
+FRAGMENT_SIZE = Field((int,), minimum=1, maximum=MAX_FRAGMENT_SIZE)
+COMPRESSION = Field((str,), choices=COMPRESSIONS)
+
+OP_FIELDS: Mapping[str, Mapping[str, Field]] = {
+    "advertise": {"topic": TOPIC, "type": Field((str,), True, maximum=MAX_TYPE_CHARS),
+                  "id": ID, "latch": Field((bool,)),
+                  "queue_size": Field((int,), minimum=0, maximum=10_000)},
+    "unadvertise": {"topic": TOPIC, "id": ID},
+    "publish": {"topic": TOPIC, "msg": Field((dict,), True), "id": ID,
+                "latch": Field((bool,))},
+    "subscribe": {"topic": TOPIC, "type": TYPE, "id": ID,
+                  "throttle_rate": Field((int, float), minimum=0, maximum=MAX_THROTTLE_MS),
+                  "queue_length": Field((int,), minimum=0, maximum=MAX_QUEUE_LENGTH),
+                  "fragment_size": FRAGMENT_SIZE, "compression": COMPRESSION},
+    "unsubscribe": {"topic": TOPIC, "id": ID},
+    "call_service": {"service": SERVICE, "args": Field((dict, list)), "id": ID, "type": TYPE,
+                     "fragment_size": FRAGMENT_SIZE, "compression": COMPRESSION,
+                     "timeout": Field((int, float), minimum=0, maximum=MAX_TIMEOUT_S)},
+    "service_response": {"service": SERVICE, "id": ID, "values": Field((dict, list, str)),
+                         "result": Field((bool,), True)},
+    "advertise_service": {"service": SERVICE,
+                          "type": Field((str,), True, maximum=MAX_TYPE_CHARS)},
+    "unadvertise_service": {"service": SERVICE},
+    "set_level": {"level": Field((str,), True, choices=STATUS_LEVELS), "id": ID},
+    "auth": {},
+}
+"""Every operation and its fields."""
+
+NAME_FIELDS: Mapping[str, str] = {
+    op: "topic" if "topic" in fields else "service"
+    for op, fields in OP_FIELDS.items() if "topic" in fields or "service" in fields}
+"""The one field of each op that names its topic or service."""
+
+
 class ProtocolError(ValueError):
     """An incoming message is not a valid rosbridge operation; the reason says why."""
+
+
+def _describe(value: Any) -> str:
+    """A short description of a bad value for an error (it may be huge)."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**20:
+        return f"a {len(str(abs(value)))}-digit integer"
+    text = repr(value)
+    return text if len(text) <= 40 else f"{text[:40]}... ({len(text)} characters)"
 
 
 def check_fields(message: Mapping[str, Any]) -> str:
     """Validate ``message`` against its operation's fields and return the op name.
 
     Raises:
-        ProtocolError: no or unknown ``op``, a required field missing, or a field of the wrong
-            type.
+        ProtocolError: no or unknown ``op``, a required field missing, a field of the wrong
+            type, a number out of its range, a string too long or not one of its choices.
     """
     op = message.get("op")
     if not isinstance(op, str):
         raise ProtocolError("message has no 'op' field")
     fields = OP_FIELDS.get(op)
     if fields is None:
-        raise ProtocolError(f"unknown op '{op}'")
+        raise ProtocolError(f"unknown op '{op[:40]}'")
     for name, spec in fields.items():
         if name not in message:
             if spec.required:
                 raise ProtocolError(f"{op}: missing field '{name}'")
             continue
-        value = message[name]
-        if isinstance(value, bool) and bool not in spec.types:
-            raise ProtocolError(f"{op}: field '{name}' has the wrong type (bool)")
-        if not isinstance(value, spec.types):
-            expected = " or ".join(t.__name__ for t in spec.types)
-            raise ProtocolError(f"{op}: field '{name}' must be {expected}, "
-                                f"got {type(value).__name__}")
+        _check_value(op, name, spec, message[name])
     return op
+
+
+def _check_value(op: str, name: str, spec: Field, value: Any) -> None:
+    if isinstance(value, bool) and bool not in spec.types:
+        raise ProtocolError(f"{op}: field '{name}' has the wrong type (bool)")
+    if not isinstance(value, spec.types):
+        expected = " or ".join(t.__name__ for t in spec.types)
+        raise ProtocolError(f"{op}: field '{name}' must be {expected}, "
+                            f"got {type(value).__name__}")
+    if isinstance(value, str):
+        if spec.choices and value not in spec.choices:
+            raise ProtocolError(f"{op}: field '{name}' must be one of "
+                                f"{', '.join(spec.choices)}, got {_describe(value)}")
+        if spec.maximum is not None and len(value) > spec.maximum:
+            raise ProtocolError(f"{op}: field '{name}' is longer than {spec.maximum:g} "
+                                f"characters ({len(value)})")
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        if spec is ID:
+            if abs(value) > MAX_ID_INTEGER:
+                raise ProtocolError(f"{op}: field 'id' must be within ±2^53, got "
+                                    f"{_describe(value)}")
+            return
+        low = -float("inf") if spec.minimum is None else spec.minimum
+        high = float("inf") if spec.maximum is None else spec.maximum
+        if not low <= value <= high:  # NaN fails too; huge ints compare exactly
+            raise ProtocolError(f"{op}: field '{name}' must be between {low:g} and {high:g}, "
+                                f"got {_describe(value)}")
+
+
+NAME_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def resolve_name(name: str, namespace: str = "/") -> str:
+    """A topic or service name resolved as ROS 2 resolves it for a node in ``namespace``.
+
+    ``odom`` and ``/odom`` are the same topic for a node at the root (rosbridge's node), so
+    both become ``/odom``; a trailing ``/`` or an empty token is an error, as are private
+    names (``~/x``: the bridge node's own) and substitutions (``{node}``).
+
+    Raises:
+        ProtocolError: not a valid ROS 2 name, with the reason.
+    """
+    if not name:
+        raise ProtocolError("empty name")
+    if len(name) > MAX_NAME_CHARS:
+        raise ProtocolError(f"name longer than {MAX_NAME_CHARS} characters")
+    if name.startswith("~"):
+        raise ProtocolError(f"'{name[:80]}': private names (~) are not offered to clients")
+    absolute = name if name.startswith("/") else f"{namespace.rstrip('/')}/{name}"
+    tokens = absolute[1:].split("/")
+    if not all(NAME_TOKEN.fullmatch(token) for token in tokens):
+        raise ProtocolError(f"'{name[:80]}' is not a ROS name (letters, digits and _ in "
+                            f"/-separated tokens, none starting with a digit)")
+    return absolute

@@ -1,16 +1,18 @@
-"""The embedded server: the simulation in real time behind a rosbridge v2 WebSocket.
+"""The embedded server: a robot in real time behind a rosbridge v2 WebSocket.
 
-asyncio and websockets. One task ticks the simulation every 50 ms against the monotonic clock
-(deadlines advance by exactly one period, so there is no drift) and hands the tick's messages
-to the ``Bridge``, which encodes each once and queues it per client. Each client has a reader
-(frames into ``Bridge.handle``) and a writer (its ``Outbox`` onto the socket), so a slow
-client only ever delays itself. websockets' ping keepalive drops dead connections.
+asyncio and websockets, in the websockets idiom: one ``ClientConnection`` object per client
+(register on connect, unregister in ``finally``), no state shared between them but the
+robot's bridge. Each client has a reader (frames into ``Bridge.handle``), a writer (its
+``Outbox`` onto the socket) and a watchdog, so a slow client only ever delays itself.
 
-Limits: pages from other origins are refused at the handshake (403, ``OriginPolicy``); a
-message over ``max_frame_bytes`` closes the connection (1009), and so does a client sending
-faster than ``max_rate`` (1008, ``RateLimit``); each client's kernel send buffer is capped.
-When the host cannot keep up (a tick starts half a period late), that tick's /scan is shed
-first; /odom and /tf keep their rate.
+Limits (``ClientLimits``, the README's limits table): pages from other origins are refused at
+the handshake (403, ``OriginPolicy``); a message over ``max_frame_bytes`` closes the
+connection (1009), and so does a client sending faster than ``max_rate`` (1008); the time
+spent handling one client's input is budgeted (``handling_share`` of a core: past it, its
+frames wait, and its socket backs up); a client that lets more than ``max_queued_bytes``
+pile up, or whose socket accepts nothing for ``stall_timeout_s`` while frames wait, is closed
+(1008), its transport aborted if even the close cannot be written. Each client's kernel send
+buffer is capped.
 """
 
 from __future__ import annotations
@@ -22,8 +24,6 @@ import json
 import logging
 import socket
 import time
-from collections import deque
-from dataclasses import dataclass
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
@@ -33,24 +33,45 @@ from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
 from physics import TICK_PERIOD_S
-from ros_nodes.rosbridge.bridge import Bridge, Session
-from ros_nodes.rosbridge.limits import DEFAULT_MAX_RATE, OriginPolicy, RateLimit
+from ros_nodes.rosbridge.bridge import Bridge
+from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy, RateLimit, TokenBucket
 from ros_nodes.rosbridge.outbox import Outbox
-from ros_nodes.rosbridge.services import add_robot_services
-from ros_nodes.topics import SCAN
+from ros_nodes.rosbridge.robot_host import RobotHost, TickStats
+from ros_nodes.rosbridge.session import Session
 from ros_nodes.virtual_robot_core import VirtualRobot
 
 log = logging.getLogger("websim.server")
 
-MAX_FRAME_BYTES = 1 << 20
-"""Largest incoming WebSocket message by default (1 MiB); larger ones close the connection
-(1009, "... exceeds limit of 1048576 bytes"). A full /scan in JSON is about 5 KiB."""
-
 POLICY_VIOLATION = 1008
-"""WebSocket close code for a client that broke a rule (rate, unread queue)."""
+"""WebSocket close code for a client that broke a rule (rate, unread queue, stalled)."""
+
+MAX_CLOSE_REASON_BYTES = 123
+"""The WebSocket protocol's limit on a close reason (RFC 6455, 5.5)."""
 
 PING_INTERVAL_S = 10.0
 """websockets keepalive: a browser that vanished without closing is dropped within ~20 s."""
+
+WATCH_PERIOD_S = 0.5
+"""How often a client's watchdog checks that its socket still accepts data."""
+
+PROGRESS_BYTES = 4096
+"""What a socket must accept to count as read from: a stalled peer's TCP window still lets a
+few bytes through now and then (zero-window probes)."""
+
+MAX_INCOMING_FRAMES = 2
+"""Frames websockets buffers per client before it stops reading the socket (so a client
+whose handling budget is spent holds at most this many frames of server memory)."""
+
+LARGE_FRAME_BYTES = 64 << 10
+"""Frames this large wait for room before the next tick (``RobotHost.before_tick_room``)."""
+
+HANDLING_S_PER_BYTE = 10e-9
+"""A generous estimate of what handling an accepted frame costs: 10 ms per MiB (parsing,
+checking and canonical form measured at 3-5 ms per MiB on this project's machines)."""
+
+FLOOD_CLOSE_TIMEOUT_S = 0.5
+"""How long a client closed for flooding gets for the close handshake: its frames are no
+longer read, so its close frame would only arrive behind them; its buffers go at once."""
 
 SEND_BUFFER_BYTES = 128 << 10
 """Kernel send buffer per client (Linux doubles it). Autotuned, it grows to about 4 MB, which a
@@ -58,89 +79,50 @@ client that stops reading fills at the stream's ~100 kB/s for most of a minute b
 outbox (bounded, newest first) takes over: 100 such clients would pin 400 MB of kernel memory.
 128 KiB is still over a second of every topic, and a LAN's bandwidth-delay product."""
 
-SHED_SCANS_AFTER_S = 0.025
-"""A tick that starts this late (half a period: the host cannot keep up with the clients)
-publishes no /scan: the biggest message goes first, /odom and /tf keep their rate."""
-
-RESYNC_AFTER_S = 1.0
-"""If the tick loop falls this far behind (a suspended laptop), it restarts its schedule
-instead of replaying every missed tick at once."""
-
-
-@dataclass
-class TickStats:
-    """What the tick loop has done, for /healthz and benchmarks.
-
-    Attributes:
-        ticks: ticks run since start.
-        started_s: when the schedule started (event-loop monotonic s), None before.
-        lateness_s: how late each recent tick started after its deadline (s).
-        resyncs: times the schedule was restarted after falling far behind.
-        scans_shed: /scan messages not published because their tick was late.
-    """
-
-    ticks: int = 0
-    started_s: float | None = None
-    lateness_s: deque[float] | None = None
-    resyncs: int = 0
-    scans_shed: int = 0
-
-    def __post_init__(self) -> None:
-        self.lateness_s = deque(maxlen=1200)
-
-    def jitter_p99_ms(self) -> float:
-        """99th percentile of recent tick lateness (ms)."""
-        samples = sorted(self.lateness_s or ())
-        if not samples:
-            return 0.0
-        return 1000.0 * samples[min(len(samples) - 1, int(0.99 * len(samples)))]
-
 
 class SimServer:
-    """The robot, its bridge and the WebSocket endpoint.
+    """The WebSocket front of one robot: handshakes, rights, and one object per client.
 
     Args:
         robot: the virtual robot to run.
         admin_token: the secret that grants admin rights (``?token=`` in the URL).
         period_s: tick period (s).
-        max_rate: messages per second one client may send before it is disconnected.
+        limits: the bounds every client lives within.
         origins: which web pages may connect; None: any (tests and benchmarks).
     """
 
     def __init__(self, robot: VirtualRobot, admin_token: str,
-                 period_s: float = TICK_PERIOD_S, max_rate: float = DEFAULT_MAX_RATE,
+                 period_s: float = TICK_PERIOD_S, limits: ClientLimits | None = None,
                  origins: OriginPolicy | None = None) -> None:
-        self.robot = robot
-        self.bridge = Bridge(robot.on_cmd_vel)
-        add_robot_services(self.bridge, robot)
+        self.host = RobotHost(robot, period_s)
+        self.limits = limits or ClientLimits()
         self._admin_token = admin_token
-        self._period_s = period_s
-        self._max_rate = max_rate
         self._origins = origins
-        RateLimit(max_rate)  # fail at start, not at the first client, on a bad rate
-        self.stats = TickStats()
         self.started_monotonic_s = time.monotonic()
-        for spec, msg in robot.latched():
-            self.bridge.publish(spec.name, msg, latch=True)
+
+    @property
+    def robot(self) -> VirtualRobot:
+        """The robot served."""
+        return self.host.robot
+
+    @property
+    def bridge(self) -> Bridge:
+        """The robot's bridge."""
+        return self.host.bridge
+
+    @property
+    def stats(self) -> TickStats:
+        """The robot's tick statistics."""
+        return self.host.stats
+
+    async def run_ticks(self) -> None:
+        """Run the robot's tick loop forever."""
+        await self.host.run_ticks()
 
     def health(self) -> dict[str, Any]:
-        """A small status report: uptime, ticks, jitter, clients, queued frames, sim time."""
-        started = self.stats.started_s
-        due = 0 if started is None else int((time.monotonic() - started) / self._period_s)
-        return {
-            "status": "ok",
-            "uptime_s": round(time.monotonic() - self.started_monotonic_s, 3),
-            "ticks": self.stats.ticks,
-            "ticks_due": due,
-            "tick_jitter_p99_ms": round(self.stats.jitter_p99_ms(), 3),
-            "tick_resyncs": self.stats.resyncs,
-            "scans_shed": self.stats.scans_shed,
-            "clients": len(self.bridge.sessions),
-            "queued_frames": sum(len(session.outbox) for session in self.bridge.sessions),
-            "sim_time_s": round(self.robot.sim.time_s, 3),
-            "mode": self.robot.sim.mode,
-            "world": self.robot.sim.world.name,
-        }
+        """A small status report: uptime, the robot's ticks, jitter, clients and faults."""
+        return {**self.host.health(),
+                "uptime_s": round(time.monotonic() - self.started_monotonic_s, 3)}
 
     def is_admin_token(self, token: str | None) -> bool:
         """Constant-time comparison of a presented token with the admin token."""
@@ -148,38 +130,17 @@ class SimServer:
             return False
         return hmac.compare_digest(token.encode(), self._admin_token.encode())
 
-    async def run_ticks(self) -> None:
-        """Tick forever at ``period_s``, deadlines fixed to the monotonic clock."""
-        loop = asyncio.get_running_loop()
-        deadline = loop.time()
-        self.stats.started_s = deadline
-        while True:
-            deadline += self._period_s
-            delay = deadline - loop.time()
-            if delay > 0:
-                await asyncio.sleep(delay)
-            now = loop.time()
-            if now - deadline > RESYNC_AFTER_S:
-                log.warning("tick loop %.1f s behind; restarting its schedule", now - deadline)
-                self.stats.resyncs += 1
-                self.stats.started_s = now - self.stats.ticks * self._period_s
-                deadline = now
-            assert self.stats.lateness_s is not None
-            lateness_s = max(0.0, now - deadline)
-            self.stats.lateness_s.append(lateness_s)
-            for spec, msg in self.robot.step():
-                if spec is SCAN and lateness_s > SHED_SCANS_AFTER_S:
-                    self.stats.scans_shed += 1
-                    continue
-                self.bridge.publish(spec.name, msg)
-            self.bridge.expire_calls()
-            self.stats.ticks += 1
-
     def process_request(self, connection: ServerConnection,
                         request: Request) -> Response | None:
         """Answer ``GET /healthz`` over plain HTTP; refuse pages from other origins (403)."""
         if urlsplit(request.path).path == "/healthz":
             return json_response(self.health())
+        if len(self.bridge.sessions) >= self.limits.max_clients:
+            log.warning("refused a WebSocket from %s: %d clients already (the limit)",
+                        _peer(connection), self.limits.max_clients)
+            return connection.respond(http.HTTPStatus.SERVICE_UNAVAILABLE,
+                                      f"this robot serves at most {self.limits.max_clients} "
+                                      "clients at once; try again later\n")
         origin = request.headers.get("Origin")
         if self._origins is not None and not self._origins.allows(
                 origin, request.headers.get("Host")):
@@ -191,58 +152,142 @@ class SimServer:
         return None
 
     async def handle_connection(self, connection: ServerConnection) -> None:
-        """Serve one client: register, read frames, and unregister in ``finally``."""
+        """Serve one client until it goes."""
         peer = _peer(connection)
         query = parse_qs(urlsplit(connection.request.path if connection.request else "").query)
         token = query.get("token", [None])[0]
         is_admin = self.is_admin_token(token)
         if token and not is_admin:
             log.warning("client %s presented a wrong admin token", peer)
-        raw_socket = connection.transport.get_extra_info("socket")
+        await ClientConnection(self.host, connection, peer, is_admin, self.limits).run()
+
+
+class ClientConnection:
+    """One client's connection: its session, reader, writer and watchdog.
+
+    Args:
+        host: the robot it talks to.
+        connection: its WebSocket.
+        peer: its address, for logs.
+        is_admin: whether it presented the admin token.
+        limits: the bounds it lives within.
+    """
+
+    def __init__(self, host: RobotHost, connection: ServerConnection, peer: str,
+                 is_admin: bool, limits: ClientLimits) -> None:
+        self._host = host
+        self._bridge = host.bridge
+        self._connection = connection
+        self._peer = peer
+        self._limits = limits
+        self._wake = asyncio.Event()
+        outbox = Outbox(limits.max_queued_bytes, limits.max_replies, wake=self._wake.set)
+        self.session = Session(peer, is_admin, outbox, limits=limits)
+        self._rate = RateLimit(limits.max_rate)
+        self._handling = TokenBucket(limits.handling_share, limits.handling_burst_s)
+        self._handed_bytes = 0
+        self._closing: asyncio.Task[None] | None = None
+
+    async def run(self) -> None:
+        """Register, read frames until the connection ends, and unregister in ``finally``."""
+        raw_socket = self._connection.transport.get_extra_info("socket")
         if raw_socket is not None:
             raw_socket.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
-        wake = asyncio.Event()
-        session = Session(peer, is_admin, Outbox(wake=wake.set))
-        self.bridge.connect(session)
-        log.info("client %s connected%s", peer, " (admin)" if is_admin else "")
-        writer = asyncio.create_task(self._write(connection, session, wake))
-        limit = RateLimit(self._max_rate)
-        closing: asyncio.Task[None] | None = None
+        self._bridge.connect(self.session)
+        log.info("client %s connected%s", self._peer,
+                 " (admin)" if self.session.is_admin else "")
+        tasks = [asyncio.create_task(self._write()), asyncio.create_task(self._watch())]
         try:
-            async for frame in connection:
-                if closing is not None:
-                    continue  # keep reading until the client's close frame arrives
-                if not limit.allow(len(frame)):
-                    log.warning("client %s: %s; disconnecting it", peer, limit.reason())
-                    closing = asyncio.create_task(
-                        connection.close(POLICY_VIOLATION, limit.reason()))
-                    continue
-                self.bridge.handle(session, frame)
+            await self._read()
+        finally:
+            for task in tasks:
+                task.cancel()
+            self._bridge.disconnect(self.session)
+            log.info("client %s disconnected", self._peer)
+            if self._closing is not None:
+                await asyncio.wait([self._closing])
+
+    async def _read(self) -> None:
+        try:
+            async for frame in self._connection:
+                if not self._rate.allow(len(frame)):
+                    self._close(POLICY_VIOLATION, self._rate.reason(), FLOOD_CLOSE_TIMEOUT_S)
+                    return  # its further frames are not even read: the close ends it
+                wait_s = self._handling.wait_s()
+                if wait_s > 0:  # its budget is spent: its frames wait, its socket backs up
+                    await asyncio.sleep(wait_s)
+                if len(frame) >= LARGE_FRAME_BYTES:  # handled between ticks, not across one
+                    await self._host.before_tick_room(len(frame) * HANDLING_S_PER_BYTE)
+                started = time.perf_counter()
+                self._bridge.handle(self.session, frame)
+                self._handling.charge(time.perf_counter() - started)
         except ConnectionClosed:
             pass
-        finally:
-            writer.cancel()
-            self.bridge.disconnect(session)
-            log.info("client %s disconnected", peer)
-            if closing is not None:
-                await asyncio.wait([closing])
 
-    async def _write(self, connection: ServerConnection, session: Session,
-                     wake: asyncio.Event) -> None:
-        """Move frames from the client's outbox onto its socket, oldest first."""
-        outbox = session.outbox
+    async def _write(self) -> None:
+        """Move frames from the outbox onto the socket, oldest first."""
+        outbox = self.session.outbox
         try:
             while True:
-                await wake.wait()
-                wake.clear()
-                if outbox.overflowed:
-                    await connection.close(POLICY_VIOLATION,
-                                           "send queue overflow: client is not reading")
+                await self._wake.wait()
+                self._wake.clear()
+                while outbox.overflowed is None and (frame := outbox.pop()) is not None:
+                    self._handed_bytes += len(frame)
+                    await self._connection.send(frame)
+                if outbox.overflowed is not None:
+                    self._close(POLICY_VIOLATION, outbox.overflowed)
                     return
-                while (frame := outbox.pop()) is not None:
-                    await connection.send(frame)
         except ConnectionClosed:
             pass
+
+    async def _watch(self) -> None:
+        """Close the client if it lets too much pile up, or its socket stops accepting.
+
+        An overflowed outbox is checked here too, since the writer may be blocked in
+        ``send``; a socket that accepts (next to) nothing for ``stall_timeout_s`` while
+        frames wait is a client that does not read.
+        """
+        loop = asyncio.get_running_loop()
+        transport = self._connection.transport
+        baseline = 0
+        progress_s = loop.time()
+        while True:
+            await asyncio.sleep(WATCH_PERIOD_S)
+            if self.session.outbox.overflowed is not None:  # the writer may be stuck in send
+                self._close(POLICY_VIOLATION, self.session.outbox.overflowed)
+                return
+            buffered = transport.get_write_buffer_size()
+            accepted = self._handed_bytes - buffered  # what the kernel took so far
+            waiting = buffered > 0 or len(self.session.outbox) > 0
+            if not waiting or accepted - baseline >= PROGRESS_BYTES:
+                baseline, progress_s = accepted, loop.time()
+                continue
+            stalled_s = loop.time() - progress_s
+            if stalled_s >= self._limits.stall_timeout_s:
+                self._close(POLICY_VIOLATION, f"not reading: the socket accepted nothing for "
+                                              f"{stalled_s:.0f} s")
+                return
+
+    def _close(self, code: int, reason: str, timeout_s: float | None = None) -> None:
+        """Start closing with ``code`` and ``reason``; abort the transport if that stalls.
+
+        ``timeout_s``: how long the close handshake may take (default
+        ``limits.close_timeout_s``).
+        """
+        if self._closing is not None:
+            return
+        log.warning("client %s: %s; disconnecting it", self._peer, reason)
+        self._closing = asyncio.create_task(self._close_or_abort(
+            code, reason, self._limits.close_timeout_s if timeout_s is None else timeout_s))
+
+    async def _close_or_abort(self, code: int, reason: str, timeout_s: float) -> None:
+        shortened = reason.encode()[:MAX_CLOSE_REASON_BYTES].decode(errors="ignore")
+        try:
+            await asyncio.wait_for(self._connection.close(code, shortened), timeout_s)
+        except TimeoutError:
+            log.warning("client %s: the close handshake could not be written; aborting",
+                        self._peer)
+            self._connection.transport.abort()
 
 
 def json_response(body: Any, status: http.HTTPStatus = http.HTTPStatus.OK) -> Response:
@@ -260,12 +305,11 @@ def _peer(connection: ServerConnection) -> str:
     return str(address)
 
 
-async def start_websocket(server: SimServer, host: str, port: int,
-                          max_frame_bytes: int = MAX_FRAME_BYTES) -> Server:
-    """Listen for rosbridge clients on ``host:port``; larger messages close with 1009."""
-    listening: Server = await serve(server.handle_connection, host, port,
-                       process_request=server.process_request,
-                       max_size=max_frame_bytes, ping_interval=PING_INTERVAL_S,
-                       ping_timeout=PING_INTERVAL_S, compression=None)
+async def start_websocket(server: SimServer, host: str, port: int) -> Server:
+    """Listen for rosbridge clients on ``host:port`` within ``server.limits``."""
+    listening: Server = await serve(
+        server.handle_connection, host, port, process_request=server.process_request,
+        max_size=server.limits.max_frame_bytes, max_queue=MAX_INCOMING_FRAMES,
+        ping_interval=PING_INTERVAL_S, ping_timeout=PING_INTERVAL_S,
+        close_timeout=server.limits.close_timeout_s, compression=None)
     return listening
-

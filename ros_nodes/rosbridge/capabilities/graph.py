@@ -1,0 +1,124 @@
+"""The relay to a ROS 2 graph (``websim serve --ros``): topics reach beyond the clients.
+
+A subscription to a topic the simulator does not publish also subscribes on the graph, and
+what clients publish (``/cmd_vel`` included) is also published there. The graph's messages
+come back through ``Topics.publish``. ``Graph`` is the only way out; this module imports no
+ROS. Without a graph attached every method does nothing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, Protocol
+
+from ros_nodes.messages import normalize_type
+from ros_nodes.rosbridge.errors import BridgeError
+from ros_nodes.rosbridge.session import Session
+
+if TYPE_CHECKING:
+    from ros_nodes.rosbridge.bridge import Bridge
+
+
+class Graph(Protocol):
+    """The ROS 2 graph beyond the bridge, as the bridge uses it; called on the bridge's thread.
+
+    Its messages enter through ``Bridge.publish`` (called on the bridge's thread too). Each
+    method raises ``BridgeError`` with the reason when it cannot do what is asked.
+    """
+
+    def topic_types(self) -> Mapping[str, str]:
+        """The topics on the graph and their types (``pkg/msg/Type``)."""
+
+    def subscribe(self, topic: str, type_name: str | None) -> None:
+        """Relay ``topic`` from the graph; ``type_name`` None: whatever type it turns out to be."""
+
+    def unsubscribe(self, topic: str) -> None:
+        """Stop relaying ``topic`` from the graph."""
+
+    def advertise(self, topic: str, type_name: str) -> None:
+        """Be ready to publish ``topic`` on the graph."""
+
+    def unadvertise(self, topic: str) -> None:
+        """Stop publishing ``topic`` on the graph."""
+
+    def publish(self, topic: str, msg: Any) -> None:
+        """Publish a message (a dict) on an advertised ``topic``."""
+
+
+class GraphRelay:
+    """The graph capability of one bridge.
+
+    Args:
+        bridge: the bridge it belongs to (its topics, and errors back to clients).
+    """
+
+    def __init__(self, bridge: Bridge) -> None:
+        self._bridge = bridge
+        self._graph: Graph | None = None
+        self._subscribed: set[str] = set()
+        self._advertised: set[str] = set()
+        self._refused: set[str] = set()
+
+    def attach(self, graph: Graph | None) -> None:
+        """Relay to and from ``graph`` from now on (None: stop relaying)."""
+        self._graph = graph
+        self._subscribed.clear()
+        self._advertised.clear()
+        self._refused.clear()
+        if graph is not None:
+            for topic in self._bridge.topics.subscribed_topics():
+                self.subscribe(None, topic, None)
+
+    def topic_types(self) -> Mapping[str, str]:
+        """The graph's topics and types (none without a graph)."""
+        return {} if self._graph is None else self._graph.topic_types()
+
+    def subscribe(self, session: Session | None, topic: str, type_name: str | None) -> None:
+        """Also relay ``topic`` from the graph, unless the simulator publishes it here."""
+        if self._graph is None or topic in self._bridge.topics.owned() \
+                or topic in self._subscribed:
+            return
+        try:
+            self._graph.subscribe(topic, normalize_type(type_name) if type_name else None)
+        except BridgeError as error:
+            if session is not None:
+                self._bridge.report(session, f"{error}; {topic} is relayed between clients "
+                                             "only")
+            return
+        self._subscribed.add(topic)
+
+    def unsubscribe(self, topic: str) -> None:
+        """The last client subscription to ``topic`` ended."""
+        if self._graph is not None and topic in self._subscribed:
+            self._subscribed.discard(topic)
+            self._graph.unsubscribe(topic)
+
+    def advertise(self, session: Session, topic: str, type_name: str) -> None:
+        """Publish ``topic`` on the graph too; a failure leaves client-to-client relay working."""
+        if self._graph is None or topic in self._advertised | self._refused:
+            return
+        try:
+            self._graph.advertise(topic, type_name)
+        except BridgeError as error:
+            self._refused.add(topic)  # said once, not at every publish
+            self._bridge.report(session, f"{error}; {topic} is relayed between clients only")
+            return
+        self._advertised.add(topic)
+
+    def unadvertise(self, topic: str) -> None:
+        """The last client advertisement of ``topic`` ended."""
+        if self._graph is None:
+            return
+        self._refused.discard(topic)
+        if topic in self._advertised:
+            self._advertised.discard(topic)
+            self._graph.unadvertise(topic)
+
+    def publish(self, session: Session, topic: str, type_name: str, msg: Any) -> None:
+        """A client published ``msg`` on ``topic``: publish it on the graph too."""
+        if self._graph is None:
+            return
+        if topic not in self._advertised:
+            self.advertise(session, topic, type_name)
+        if topic in self._advertised:
+            self._graph.publish(topic, msg)

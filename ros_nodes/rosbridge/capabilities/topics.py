@@ -1,0 +1,274 @@
+"""Topics: advertise, unadvertise, publish, subscribe, unsubscribe; throttles, queues, latching.
+
+The one path for every message: a client's ``publish`` and an in-process endpoint's
+(``publish``, e.g. the robot's /odom) both go through ``_deliver``, and in-process subscribers
+(``subscribe_local``, e.g. the robot's /cmd_vel) get what clients publish, as another client
+would. Messages of known types are relayed in their canonical form (``message_types``);
+other (client-defined) types are relayed as sent within the publisher's relay budget.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from physics import ConfigError
+from ros_nodes import message_types
+from ros_nodes.messages import normalize_type
+from ros_nodes.rosbridge.encoding import to_cbor, to_json
+from ros_nodes.rosbridge.errors import BridgeError
+from ros_nodes.rosbridge.outbox import Frame
+from ros_nodes.rosbridge.session import Session, Subscription
+
+if TYPE_CHECKING:
+    from ros_nodes.rosbridge.bridge import Bridge
+
+log = logging.getLogger("websim.bridge")
+
+THROTTLE_JITTER_S = 0.005
+"""Tick jitter a throttle tolerates: ``throttle_rate`` is the least time between two messages
+(rosbridge's definition), less this, so a 200 ms throttle on the 20 Hz /odom gives 5 Hz even
+when a tick starts a few milliseconds early relative to the last one sent."""
+
+LocalSubscriber = Callable[[Any, Session], None]
+"""An in-process subscriber: called with a client's (canonical) message and its publisher.
+It raises ``ConfigError`` to refuse the message; the reason goes back to the publisher."""
+
+
+class Encoded:
+    """One publish envelope, encoded at most once per format whatever the subscriber count."""
+
+    def __init__(self, topic: str, msg: Any) -> None:
+        self.envelope = {"op": "publish", "topic": topic, "msg": msg}
+        self._json: str | None = None
+        self._cbor: bytes | None = None
+
+    def frame(self, compression: str) -> Frame:
+        """The frame for subscribers that asked for ``compression``."""
+        if compression == "cbor":
+            if self._cbor is None:
+                self._cbor = to_cbor(self.envelope)
+            return self._cbor
+        if self._json is None:
+            self._json = to_json(self.envelope)
+        return self._json
+
+
+class Topics:
+    """The topic capability of one bridge.
+
+    Args:
+        bridge: the bridge it belongs to (sessions, clock, errors, the graph relay).
+    """
+
+    OPS = ("advertise", "unadvertise", "publish", "subscribe", "unsubscribe")
+
+    def __init__(self, bridge: Bridge) -> None:
+        self._bridge = bridge
+        self._types: dict[str, str] = {}
+        self._owned: set[str] = set()
+        self._subscribers: dict[str, set[Session]] = {}
+        self._local: dict[str, list[LocalSubscriber]] = {}
+        self._latched: dict[str, Encoded] = {}
+        message_types.load()  # now, not at the first publish (it takes ~0.1 s)
+
+    def handlers(self) -> dict[str, Callable[[Session, dict[str, Any]], None]]:
+        """This capability's ops."""
+        return {"advertise": self._advertise, "unadvertise": self._unadvertise,
+                "publish": self._publish, "subscribe": self._subscribe,
+                "unsubscribe": self._unsubscribe}
+
+    # ---- in-process endpoints ---------------------------------------------------------------
+
+    def own(self, topic: str, type_name: str) -> None:
+        """Declare ``topic`` published in-process (the robot's outputs): clients may not."""
+        self._types[topic] = normalize_type(type_name)
+        self._owned.add(topic)
+
+    def subscribe_local(self, topic: str, type_name: str, callback: LocalSubscriber) -> None:
+        """Give ``callback`` every message clients publish on ``topic`` (of ``type_name``)."""
+        self._types[topic] = normalize_type(type_name)
+        self._local.setdefault(topic, []).append(callback)
+
+    def publish(self, topic: str, msg: Any, latch: bool = False) -> None:
+        """Send an in-process message (the robot's, the ROS graph's) to ``topic``'s clients."""
+        encoded = Encoded(topic, msg)
+        if latch:
+            self._latched[topic] = encoded
+        self._deliver(topic, encoded)
+
+    def has_subscribers(self, topic: str) -> bool:
+        """Whether any client subscribes to ``topic``."""
+        return bool(self._subscribers.get(topic))
+
+    def types(self) -> dict[str, str]:
+        """Every topic known here and its type."""
+        return dict(self._types)
+
+    def subscribed_topics(self) -> list[str]:
+        """Topics some client subscribes to."""
+        return list(self._subscribers)
+
+    def owned(self) -> frozenset[str]:
+        """Topics only in-process endpoints publish."""
+        return frozenset(self._owned)
+
+    def disconnect(self, session: Session) -> None:
+        """Drop every subscription and advertisement of ``session``."""
+        for topic in list(session.subscriptions):
+            self._drop_subscription(session, topic)
+        for topic in list(session.advertised):
+            self._drop_advertisement(session, topic)
+
+    # ---- advertise ------------------------------------------------------------------------
+
+    def _known_type(self, topic: str, type_name: str) -> str:
+        """Check ``type_name`` against what ``topic`` is known to carry; return it normalised."""
+        try:
+            normalized = normalize_type(type_name)
+        except ValueError as error:
+            raise BridgeError(f"{topic}: {error}") from None
+        known = self._types.get(topic)
+        if known is not None and known != normalized:
+            raise BridgeError(f"{topic} carries {known}, not {normalized}")
+        return normalized
+
+    def _refuse_owned(self, topic: str) -> None:
+        if topic in self._owned:
+            raise BridgeError(f"{topic} is published by the simulator; clients cannot "
+                              "publish it")
+
+    def _advertise(self, session: Session, message: dict[str, Any]) -> None:
+        topic = message["topic"]
+        self._refuse_owned(topic)
+        type_name = self._known_type(topic, message["type"])
+        self._types[topic] = type_name
+        session.advertised.setdefault(topic, {})[message.get("id")] = type_name
+        self._bridge.graph.advertise(session, topic, type_name)
+
+    def _unadvertise(self, session: Session, message: dict[str, Any]) -> None:
+        topic = message["topic"]
+        ids = session.advertised.get(topic)
+        if ids is None:
+            return
+        if "id" in message and message["id"] in ids and len(ids) > 1:
+            del ids[message["id"]]  # other ids still hold the advertisement (rosbridge)
+            return
+        self._drop_advertisement(session, topic)
+
+    def _drop_advertisement(self, session: Session, topic: str) -> None:
+        if session.advertised.pop(topic, None) is None:
+            return
+        still_used = topic in self._owned or topic in self._local or any(
+            topic in other.advertised for other in self._bridge.sessions)
+        if not still_used:
+            self._types.pop(topic, None)
+            self._latched.pop(topic, None)
+        if not any(topic in other.advertised for other in self._bridge.sessions):
+            self._bridge.graph.unadvertise(topic)
+
+    # ---- publish --------------------------------------------------------------------------
+
+    def _publish(self, session: Session, message: dict[str, Any]) -> None:
+        topic = message["topic"]
+        self._refuse_owned(topic)
+        ids = session.advertised.get(topic)
+        type_name = next(iter(ids.values())) if ids else self._types.get(topic)
+        if type_name is None:
+            raise BridgeError(f"publish to {topic}: advertise it first (type unknown)")
+        msg = message["msg"]
+        if message_types.known(type_name):
+            try:
+                msg = message_types.canonical(type_name, msg)
+            except ConfigError as error:
+                raise BridgeError(f"publish to {topic}: {error}") from None
+        size = session.frame_bytes  # what arrived: known before anything is encoded
+        latch = bool(message.get("latch"))
+        if latch and size > session.limits.max_latched_bytes:
+            raise BridgeError(f"publish to {topic}: a latched message may be at most "
+                              f"{session.limits.max_latched_bytes} bytes, this one is {size}")
+        if not session.relay_budget.take(size):
+            raise BridgeError(f"publish to {topic}: more than "
+                              f"{session.limits.relay_bytes_per_s} bytes/s published; "
+                              "message dropped")
+        for callback in self._local.get(topic, ()):
+            try:
+                callback(msg, session)
+            except ConfigError as error:
+                raise BridgeError(f"{topic}: {error}") from None
+        encoded = Encoded(topic, msg)
+        if latch:
+            self._latched[topic] = encoded
+        self._deliver(topic, encoded)
+        self._bridge.graph.publish(session, topic, type_name, msg)
+
+    def _deliver(self, topic: str, encoded: Encoded) -> None:
+        now = self._bridge.clock()
+        for session in self._subscribers.get(topic, ()):
+            subscription = session.subscriptions[topic]
+            throttle_ms, queue_length = subscription.effective()
+            gap_s = now - subscription.last_sent_s
+            if throttle_ms > 0 and gap_s < throttle_ms / 1000.0 - THROTTLE_JITTER_S:
+                continue
+            subscription.last_sent_s = now
+            try:
+                frame = encoded.frame(subscription.compression)
+            except (TypeError, ValueError) as error:  # a message no encoder can write
+                self._bridge.faults.record(f"encoding {topic}", error)
+                return
+            try:
+                session.outbox.put_topic(topic, frame, queue_length)
+            except Exception as error:  # one client's fault is not the others'
+                self._bridge.faults.record(f"delivering {topic}", error)
+
+    # ---- subscribe ------------------------------------------------------------------------
+
+    def _subscribe(self, session: Session, message: dict[str, Any]) -> None:
+        topic = message["topic"]
+        if message.get("type"):
+            self._known_type(topic, message["type"])
+        limits = session.limits
+        throttle_ms = float(message.get("throttle_rate", 0))
+        queue_length = min(int(message.get("queue_length", 0)), limits.max_queue_length)
+        subscription = session.subscriptions.get(topic)
+        sub_id = message.get("id")
+        if subscription is not None and sub_id not in subscription.throttle_ms \
+                and len(subscription.throttle_ms) >= limits.max_ids_per_topic:
+            raise BridgeError(f"subscribe {topic}: a client may hold at most "
+                              f"{limits.max_ids_per_topic} subscribe ids on one topic")
+        if subscription is None:
+            subscription = session.subscriptions[topic] = Subscription()
+        subscription.throttle_ms[sub_id] = throttle_ms
+        subscription.queue_length[sub_id] = queue_length
+        if message.get("compression") == "cbor":
+            subscription.compression = "cbor"
+        self._subscribers.setdefault(topic, set()).add(session)
+        self._bridge.graph.subscribe(session, topic, message.get("type") or
+                                     self._types.get(topic))
+        latched = self._latched.get(topic)
+        if latched is not None:
+            _, length = subscription.effective()
+            session.outbox.put_topic(topic, latched.frame(subscription.compression), length)
+
+    def _unsubscribe(self, session: Session, message: dict[str, Any]) -> None:
+        topic = message["topic"]
+        subscription = session.subscriptions.get(topic)
+        if subscription is None:
+            return
+        if "id" in message and message["id"] in subscription.throttle_ms:
+            del subscription.throttle_ms[message["id"]]
+            del subscription.queue_length[message["id"]]
+            if subscription.throttle_ms:
+                return
+        self._drop_subscription(session, topic)
+
+    def _drop_subscription(self, session: Session, topic: str) -> None:
+        session.subscriptions.pop(topic, None)
+        session.outbox.discard_topic(topic)
+        subscribers = self._subscribers.get(topic)
+        if subscribers is not None:
+            subscribers.discard(session)
+            if not subscribers:
+                del self._subscribers[topic]
+                self._bridge.graph.unsubscribe(topic)

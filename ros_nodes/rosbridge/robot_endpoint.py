@@ -1,0 +1,50 @@
+"""The robot attached to its bridge like a client of the hub: one path in, one path out.
+
+The robot subscribes /cmd_vel (``Topics.subscribe_local``: it gets what clients publish, in
+canonical form, as any subscriber would) and publishes its topics (``Topics.publish``), which
+it owns: clients may not publish them. Its services (parameters, reset, rosapi) are added to
+the bridge's service capability.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ros_nodes.rosbridge.bridge import Bridge
+from ros_nodes.rosbridge.robot_services import add_robot_services
+from ros_nodes.rosbridge.session import Session
+from ros_nodes.topics import CMD_VEL, PUBLISHED_TOPICS
+from ros_nodes.virtual_robot_core import Publication, VirtualRobot
+
+
+class RobotEndpoint:
+    """One robot's connection to its bridge.
+
+    Args:
+        bridge: the bridge of this robot.
+        robot: the robot.
+
+    Attributes:
+        last_driver: the address of the client whose /cmd_vel the robot took last (None: none
+            yet).
+    """
+
+    def __init__(self, bridge: Bridge, robot: VirtualRobot) -> None:
+        self.bridge = bridge
+        self.robot = robot
+        self.last_driver: str | None = None
+        for spec in PUBLISHED_TOPICS:
+            bridge.topics.own(spec.name, spec.type)
+        bridge.topics.subscribe_local(CMD_VEL.name, CMD_VEL.type, self._on_cmd_vel)
+        add_robot_services(bridge, robot)
+        for spec, msg in robot.latched():
+            bridge.publish(spec.name, msg, latch=True)
+
+    def _on_cmd_vel(self, msg: Any, publisher: Session) -> None:
+        self.robot.on_cmd_vel(msg)  # raises ConfigError: the reason goes to the publisher
+        self.last_driver = publisher.peer
+
+    def publish(self, publications: list[Publication]) -> None:
+        """Send one tick's messages to the subscribers."""
+        for spec, msg in publications:
+            self.bridge.publish(spec.name, msg)

@@ -1,0 +1,81 @@
+"""One connected client, as every capability of the bridge sees it.
+
+A ``Session`` holds everything of one client and nothing of any other: its rights, its
+subscriptions and advertisements, the services it offers, its outbox and its budgets. The
+bridge's tables point at sessions; dropping a session (``Bridge.disconnect``) releases all of
+it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from ros_nodes.rosbridge.encoding import to_json
+from ros_nodes.rosbridge.limits import ClientLimits, TokenBucket
+from ros_nodes.rosbridge.outbox import Outbox
+
+
+@dataclass
+class Subscription:
+    """One client's subscription to one topic, merged over its subscribe ids.
+
+    Attributes:
+        throttle_ms: per id, the least time between two messages (ms).
+        queue_length: per id, how many of the newest messages may wait.
+        compression: ``"none"`` or ``"cbor"``.
+        last_sent_s: when the last message was queued (monotonic s).
+    """
+
+    throttle_ms: dict[Any, float] = field(default_factory=dict)
+    queue_length: dict[Any, int] = field(default_factory=dict)
+    compression: str = "none"
+    last_sent_s: float = -math.inf
+
+    def effective(self) -> tuple[float, int]:
+        """(throttle_ms, queue_length) in force: the least throttle, the longest queue."""
+        return min(self.throttle_ms.values()), max(self.queue_length.values())
+
+
+class Session:
+    """One connected client: its rights, subscriptions, advertisements, outbox and budgets.
+
+    Args:
+        peer: the client's address, for logs.
+        is_admin: whether it presented the admin token.
+        outbox: where its outgoing frames wait (default: one bounded by ``limits``).
+        limits: the bounds this client lives within.
+        clock: monotonic clock (s) for its budgets.
+
+    Attributes:
+        advertised: topic -> {advertise id: type}; a topic stays advertised while any id does.
+        services: service name -> type, for the services this client offers.
+        relay_budget: bytes/s of messages it may have relayed to other clients.
+    """
+
+    def __init__(self, peer: str, is_admin: bool, outbox: Outbox | None = None, *,
+                 limits: ClientLimits | None = None,
+                 clock: Callable[[], float] | None = None) -> None:
+        self.peer = peer
+        self.is_admin = is_admin
+        self.limits = limits or ClientLimits()
+        self.outbox = outbox if outbox is not None else \
+            Outbox(self.limits.max_queued_bytes, self.limits.max_replies)
+        self.subscriptions: dict[str, Subscription] = {}
+        self.advertised: dict[str, dict[Any, str]] = {}
+        self.services: dict[str, str] = {}
+        self.status_level: str | None = None
+        self.frame_bytes = 0
+        """Size of the frame being handled (what a publish costs the relay budget)."""
+        budget_args = () if clock is None else (clock,)
+        self.relay_budget = TokenBucket(self.limits.relay_bytes_per_s,
+                                        self.limits.relay_bytes_per_s, *budget_args)
+
+    def reply(self, message: Mapping[str, Any]) -> None:
+        """Queue a reply (JSON text)."""
+        self.outbox.put_reply(to_json(message))
+
+    def __repr__(self) -> str:
+        return f"Session({self.peer}{', admin' if self.is_admin else ''})"

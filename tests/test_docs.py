@@ -1,0 +1,64 @@
+"""What is written down twice is held equal to its one source.
+
+The README's parameter table is ``parameters.markdown_table()``; its limits table states
+``ClientLimits``' and the schema's numbers; ``web-interface/robot.json`` (what nginx serves in
+the Docker stack) is ``websim robot-json`` for the shipped parameters.
+"""
+
+from __future__ import annotations
+
+import io
+from contextlib import redirect_stdout
+from pathlib import Path
+
+from ros_nodes.parameters import markdown_table
+from ros_nodes.robot_description import robot_json
+from ros_nodes.rosbridge import encoding, schema
+from ros_nodes.rosbridge.limits import ClientLimits
+from websim.cli import main
+
+ROOT = Path(__file__).resolve().parent.parent
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+
+
+def test_readme_parameter_table_is_made_from_the_parameter_specs() -> None:
+    assert markdown_table() in README, "regenerate: python -c 'from ros_nodes.parameters " \
+        "import markdown_table; print(markdown_table())'"
+
+
+def test_readme_limits_table_states_the_defaults_in_force() -> None:
+    limits = ClientLimits()
+    rows = {
+        "message size": f"{limits.max_frame_bytes >> 20} MiB",
+        "message rate": f"{limits.max_rate:g} messages/s",
+        "JSON nesting": f"{encoding.MAX_NESTING} levels",
+        "JSON elements (values, objects, arrays)": f"{encoding.MAX_ELEMENTS:,} per message",
+        "handling time": f"{limits.handling_share:.0%} of a core per client, sustained, "
+                         f"{limits.handling_burst_s:g} s burst".replace("%", " %"),
+        "bytes waiting to be sent to a client": f"{limits.max_queued_bytes >> 20} MiB",
+        "replies waiting (service responses, statuses)": f"{limits.max_replies}",
+        "a socket that accepts nothing while frames wait":
+            f"{limits.stall_timeout_s:g} s; the close handshake gets {limits.close_timeout_s:g} s",
+        "`queue_length`": f"0 to {schema.MAX_QUEUE_LENGTH}",
+        "`throttle_rate`": f"0 to {schema.MAX_THROTTLE_MS:,} ms",
+        "`id`": f"a string of at most {schema.MAX_ID_CHARS} characters",
+        "names, types": f"{schema.MAX_NAME_CHARS} characters",
+        "subscribe ids per topic per client": f"{limits.max_ids_per_topic}",
+        "subscriptions / advertised topics / offered services per client":
+            f"{limits.max_subscriptions} / {limits.max_advertised} / {limits.max_services}",
+        "a message published with `latch: true`": f"{limits.max_latched_bytes >> 10} KiB",
+        "bytes/s a client's publications are relayed to others":
+            f"{limits.relay_bytes_per_s >> 10} KiB/s",
+        "clients per robot": f"{limits.max_clients}",
+    }
+    for limit, default in rows.items():
+        assert f"| {limit} | {default}" in README, f"README limits table: {limit}"
+
+
+def test_committed_robot_json_is_the_shipped_robot() -> None:
+    committed = (ROOT / "web-interface" / "robot.json").read_text(encoding="utf-8")
+    assert committed == robot_json(), "regenerate: websim robot-json > web-interface/robot.json"
+    printed = io.StringIO()
+    with redirect_stdout(printed):
+        assert main(["robot-json"]) == 0
+    assert printed.getvalue() == committed

@@ -1,0 +1,465 @@
+"""The web interface over HTTP, on the event loop that runs the simulation (aiohttp).
+
+``websim serve`` serves the pages, the files they load, ``/healthz`` and the live
+``/robot.json``; the Docker stack serves the same files with nginx. Only an allow-list is
+published (``open_published``): the pages, ``css/``, ``js/`` and the built folders of the three
+libraries the pages load, never a listing, a dotfile, the Dockerfile, nginx.conf, the
+entrypoint scripts or package.json, and never a file a symlink leads to outside that list.
+
+Connections are bounded by construction, for a classroom on one process's file descriptors:
+
+* a connection with no request in progress (idle keep-alive, or a request whose headers have
+  not all arrived: a half-open or slowloris client) is closed ``IDLE_TIMEOUT_S`` after it
+  connected or got its last response; a request still being answered (a client that stops
+  reading) is cut after ``REQUEST_TIMEOUT_S``;
+* at most ``connection_cap()`` connections are open, a quarter of the process's open-file
+  limit (the rest is for WebSockets and files); a connection beyond it evicts the one idle
+  the longest, so a thousand stalled sockets cannot lock out a browser;
+* the listen backlog (``LISTEN_BACKLOG``) holds a whole class loading the page at once.
+
+Files are read into memory on first use and again when they change (the allow-list bounds
+what can be cached), gzipped once when that pays, and answered with an ETag, so a classroom
+reloading after every update costs a 304 per file.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import gzip
+import json
+import logging
+import os
+import re
+import stat
+from collections import OrderedDict
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from fnmatch import fnmatch
+from pathlib import Path
+from typing import Any
+
+from aiohttp import web
+from aiohttp.abc import AbstractAccessLogger
+
+log = logging.getLogger("websim.http")
+
+PAGE_ROUTES = {"/": "index.html", "/admin": "admin.html"}
+"""Clean URLs the course uses, mapped to files of the web folder."""
+
+TOP_LEVEL_FILES = ("*.html", "favicon.svg", "config.json")
+"""Files published from the top of the web folder: the pages (also a page copied there, as
+``examples/roslibjs_page.html`` says; the Docker image copies ``*.html`` too), the icon and
+the site's settings. ``robot.json`` is not a file here: it is answered live."""
+
+PUBLISHED_TREES = ("css", "js", "node_modules/roslib/build", "node_modules/nipplejs/dist",
+                   "node_modules/uplot/dist")
+"""Folders published with everything below them: the pages' own styles and modules, and the
+built files of the libraries the pages load (``index.html``, ``admin.html``, ``js/vendor.js``),
+not the libraries' sources or package files."""
+
+CONTENT_TYPES = {
+    ".html": "text/html; charset=utf-8",
+    ".js": "text/javascript; charset=utf-8",
+    ".mjs": "text/javascript; charset=utf-8",
+    ".css": "text/css; charset=utf-8",
+    ".json": "application/json",
+    ".map": "application/json",
+    ".svg": "image/svg+xml",
+    ".png": "image/png",
+    ".ico": "image/x-icon",
+    ".woff2": "font/woff2",
+}
+"""The only file types published, with their MIME types (not the system's mime.types, which
+differ between machines: module scripts must be a JavaScript type or the browser refuses)."""
+
+COMPRESSIBLE = frozenset({".html", ".js", ".mjs", ".css", ".json", ".map", ".svg"})
+
+GZIP_MIN_BYTES = 1024
+"""Smaller files are sent as they are: the gzip header and a round of inflating cost more."""
+
+GZIP_LEVEL = 5
+"""zlib level: the largest file (uPlot, 145 kB) in ~3 ms on the loop, within 2 % of level 9's
+size; once per file and change."""
+
+SEGMENT = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]*")
+"""One path segment of a published file: no dotfile, ``.``, ``..``, empty segment (a
+directory's trailing slash), backslash, NUL or other oddity."""
+
+CACHE_CONTROL = "no-cache"
+"""Every answer is revalidated: a classroom reloads after every update (ETags make it a 304)."""
+
+LISTEN_BACKLOG = 1024
+"""Connections the kernel queues before they are accepted: 40 browsers opening 6 each at
+once fit, where the old backlog of 5 made them wait seconds for SYN retries. The kernel caps
+it at net.core.somaxconn (4096 on current Linux)."""
+
+IDLE_TIMEOUT_S = 10.0
+"""A connection without a request in progress is closed this long after it connected or got
+its last response: an idle keep-alive connection (a page has loaded all it needs by then), or
+a request whose headers have not arrived (half-open, slowloris). Apache's default keep-alive
+is 5 s, nginx's header timeout 60 s."""
+
+REQUEST_TIMEOUT_S = 30.0
+"""A request still being answered this long after its headers arrived is cut: the largest
+file takes ~3 s at 50 kB/s, so only a client that stopped reading is this slow."""
+
+SHUTDOWN_TIMEOUT_S = 2.0
+"""At shutdown, requests in progress get this long to finish before their connections close."""
+
+FD_SHARE_FOR_HTTP = 4
+"""HTTP connections may use 1/this of the process's open-file limit; WebSockets and files
+the rest."""
+
+MIN_CONNECTION_CAP = 16
+
+UNLIMITED_FILES = 1 << 16
+"""The open-file limit assumed where there is none (Windows, or RLIM_INFINITY)."""
+
+
+def open_published(web_dir: str, url_path: str) -> tuple[int, str] | None:
+    """Open the published file a URL path names; None when there is none (then: 404).
+
+    The URL must name an allow-listed file of a published type, and so must the real path of
+    the file opened (after every symlink, and read from the open file, so that swapping a
+    symlink between a check and the open cannot lead out of the web folder).
+
+    Args:
+        web_dir: the web folder, with every symlink resolved (``os.path.realpath``).
+        url_path: the request's path, percent-decoded, starting with ``/``.
+
+    Returns:
+        A file descriptor the caller closes, and the file's real path relative to
+        ``web_dir`` (``/``-separated).
+    """
+    relative = PAGE_ROUTES.get(url_path, url_path.removeprefix("/"))
+    if not _published(relative):
+        return None
+    candidate = os.path.join(web_dir, relative)
+    try:  # O_NONBLOCK: a FIFO planted in the folder opens instead of blocking the loop
+        fd = os.open(candidate, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError:  # missing, unreadable, a symlink loop
+        return None
+    try:
+        real = _real_path(fd, candidate)
+        inside = real.startswith(web_dir + os.sep)
+        real_relative = real[len(web_dir) + 1:].replace(os.sep, "/")
+        if inside and _published(real_relative) and stat.S_ISREG(os.fstat(fd).st_mode):
+            return fd, real_relative
+    except OSError:
+        pass
+    os.close(fd)
+    return None
+
+
+def _real_path(fd: int, opened_as: str) -> str:
+    """The real path of an open file: Linux tells it from the descriptor itself."""
+    try:
+        return os.readlink(f"/proc/self/fd/{fd}")
+    except OSError:  # no /proc (macOS): resolve the name, as the open just did
+        return os.path.realpath(opened_as)
+
+
+def _published(relative: str) -> bool:
+    """Whether a path relative to the web folder is on the allow-list (by name only)."""
+    segments = relative.split("/")
+    if not all(SEGMENT.fullmatch(segment) for segment in segments):
+        return False
+    if os.path.splitext(relative)[1] not in CONTENT_TYPES:
+        return False
+    if len(segments) == 1:
+        return any(fnmatch(relative, pattern) for pattern in TOP_LEVEL_FILES)
+    return any(relative.startswith(tree + "/") for tree in PUBLISHED_TREES)
+
+
+def raise_open_file_limit() -> int:
+    """Raise the soft RLIMIT_NOFILE to the hard limit (common practice for servers).
+
+    Returns:
+        The soft limit in effect afterwards (a large number where there is no such limit).
+    """
+    try:
+        import resource
+    except ImportError:  # Windows: no such limit to raise
+        return UNLIMITED_FILES
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if hard != soft:
+        try:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (hard, hard))
+        except (ValueError, OSError) as error:  # e.g. macOS: unlimited hard, capped soft
+            log.debug("open-file limit stays %d (hard %d): %s", soft, hard, error)
+        else:
+            log.debug("open-file limit raised from %d to %d", soft, hard)
+            soft = hard
+    return soft if soft != resource.RLIM_INFINITY else UNLIMITED_FILES
+
+
+def connection_cap(open_file_limit: int) -> int:
+    """The most HTTP connections open at once, for a process allowed this many files."""
+    return max(MIN_CONNECTION_CAP, open_file_limit // FD_SHARE_FOR_HTTP)
+
+
+@dataclass
+class _Connection:
+    transport: asyncio.Transport
+    busy: bool = False
+    timer: asyncio.TimerHandle | None = None
+
+
+class ConnectionTable:
+    """The open HTTP connections, the one active longest ago first.
+
+    Each has a timer: ``IDLE_TIMEOUT_S`` while no request is in progress, ``REQUEST_TIMEOUT_S``
+    while one is; when it fires the connection is aborted. Beyond ``cap`` connections, the one
+    idle longest is aborted to make room (never one answering a request); when every one is
+    answering, the newcomer is refused.
+    """
+
+    def __init__(self, cap: int) -> None:
+        self.cap = cap
+        self._open: OrderedDict[object, _Connection] = OrderedDict()
+
+    def __len__(self) -> int:
+        return len(self._open)
+
+    def opened(self, key: object, transport: asyncio.Transport) -> None:
+        """A connection was accepted: make room for it and start its idle timer."""
+        if len(self._open) >= self.cap:
+            idle = next((k for k, conn in self._open.items() if not conn.busy), None)
+            if idle is None:
+                log.debug("HTTP connection refused: %d connections all answering", self.cap)
+                transport.abort()
+                return
+            self._abort(idle)
+        self._open[key] = connection = _Connection(transport)
+        self._arm(key, connection, IDLE_TIMEOUT_S)
+
+    def closed(self, key: object) -> None:
+        """A connection ended, however."""
+        connection = self._open.pop(key, None)
+        if connection is not None and connection.timer is not None:
+            connection.timer.cancel()
+
+    def begin(self, key: object) -> None:
+        """A request's headers arrived: it is answering now."""
+        connection = self._open.get(key)
+        if connection is not None:
+            connection.busy = True
+            self._open.move_to_end(key)
+            self._arm(key, connection, REQUEST_TIMEOUT_S)
+
+    def end(self, key: object) -> None:
+        """The answer is sent: idle again."""
+        connection = self._open.get(key)
+        if connection is not None:
+            connection.busy = False
+            self._open.move_to_end(key)
+            self._arm(key, connection, IDLE_TIMEOUT_S)
+
+    def _arm(self, key: object, connection: _Connection, delay_s: float) -> None:
+        if connection.timer is not None:
+            connection.timer.cancel()
+        connection.timer = asyncio.get_running_loop().call_later(delay_s, self._abort, key)
+
+    def _abort(self, key: object) -> None:
+        connection = self._open.pop(key, None)
+        if connection is not None:
+            if connection.timer is not None:
+                connection.timer.cancel()
+            connection.transport.abort()
+
+
+class _TrackedServer(web.Server):
+    """aiohttp's low-level server, reporting its connections to a ``ConnectionTable``."""
+
+    def __init__(self, handler: Callable[[web.BaseRequest], Awaitable[web.StreamResponse]],
+                 connections: ConnectionTable, **kwargs: Any) -> None:
+        super().__init__(handler, **kwargs)
+        self.tracked = connections
+
+    def connection_made(self, handler: web.RequestHandler,
+                        transport: asyncio.Transport) -> None:
+        super().connection_made(handler, transport)
+        self.tracked.opened(handler, transport)
+
+    def connection_lost(self, handler: web.RequestHandler,
+                        exc: BaseException | None = None) -> None:
+        self.tracked.closed(handler)
+        super().connection_lost(handler, exc)
+
+
+class _AccessLogger(AbstractAccessLogger):
+    """One debug line per request; the path without its query (it may carry the token)."""
+
+    def log(self, request: web.BaseRequest, response: web.StreamResponse,
+            time: float) -> None:
+        self.logger.debug('%s "%s %s" %d %.1f ms', request.remote, request.method,
+                          request.path, response.status, time * 1e3)
+
+    @property
+    def enabled(self) -> bool:
+        """Whether lines would be logged (aiohttp skips timing the request otherwise)."""
+        return self.logger.isEnabledFor(logging.DEBUG)
+
+
+class _ClientFaultLogger(logging.Logger):
+    """aiohttp's protocol logger, which logs at debug what it would log as errors.
+
+    What it reports (malformed requests, clients gone away) is the client's doing, so it goes
+    where the access log goes: a client cannot fill the log. Our own handler's failures are
+    logged as errors by ``HttpServer`` itself.
+    """
+
+    def exception(self, msg: object, *args: object, **kwargs: Any) -> None:
+        kwargs.setdefault("exc_info", True)
+        self.debug(msg, *args, **kwargs)
+
+
+@dataclass(frozen=True)
+class _Asset:
+    """A published file in memory: ``key`` tells whether the file changed since."""
+
+    key: tuple[int, int, int]  # inode, mtime (ns), size
+    body: bytes
+    gzipped: bytes | None
+    content_type: str
+    etag: str
+
+
+class HttpServer:
+    """The web interface's HTTP server; ``start_http`` starts one, ``close()`` stops it."""
+
+    def __init__(self, web_dir: Path, health: Callable[[], dict[str, Any]],
+                 robot_json: Callable[[], str], cap: int) -> None:
+        self._web_dir = os.path.realpath(web_dir)
+        self._health = health
+        self._robot_json = robot_json
+        self._assets: dict[str, _Asset] = {}  # by real path in the web folder
+        self.connections = ConnectionTable(cap)
+        protocol_log = _ClientFaultLogger("websim.http.protocol")
+        protocol_log.parent = log
+        self._server = _TrackedServer(
+            self._handle, self.connections, keepalive_timeout=IDLE_TIMEOUT_S,
+            access_log_class=_AccessLogger, access_log=log, logger=protocol_log)
+        self._listener: asyncio.Server | None = None
+
+    async def listen(self, host: str, port: int) -> None:
+        """Bind and accept; raises OSError (a port in use, say)."""
+        loop = asyncio.get_running_loop()
+        self._listener = await loop.create_server(self._server, host or None, port,
+                                                  backlog=LISTEN_BACKLOG, reuse_address=True)
+
+    async def close(self) -> None:
+        """Stop accepting, let requests in progress finish (briefly), close every connection."""
+        if self._listener is not None:
+            self._listener.close()
+        for connection in self._server.connections:
+            connection.close()  # idle ones (and half-open) go now, busy ones after their answer
+        await self._server.shutdown(SHUTDOWN_TIMEOUT_S)
+        if self._listener is not None:
+            await self._listener.wait_closed()
+            self._listener = None
+
+    async def _handle(self, request: web.BaseRequest) -> web.StreamResponse:
+        """Answer one request, the whole response sent within the connection's request timer."""
+        connection = request.protocol
+        self.connections.begin(connection)
+        try:
+            try:
+                response = self._respond(request)
+            except Exception:
+                log.exception("HTTP %s %s failed", request.method, request.path)
+                response = web.Response(status=500, text="500: Internal Server Error")
+            response.headers.setdefault("Cache-Control", CACHE_CONTROL)
+            response.headers["X-Content-Type-Options"] = "nosniff"
+            response.headers["Server"] = "websim"  # not aiohttp's and Python's versions
+            await response.prepare(request)
+            await response.write_eof()
+            return response
+        finally:
+            self.connections.end(connection)
+
+    def _respond(self, request: web.BaseRequest) -> web.Response:
+        if request.method not in ("GET", "HEAD"):
+            return web.Response(status=405, text="405: Method Not Allowed",
+                                headers={"Allow": "GET, HEAD"})
+        if request.path == "/healthz":
+            return web.Response(text=json.dumps(self._health()), content_type="application/json",
+                                headers={"Cache-Control": "no-store"})
+        if request.path == "/robot.json":
+            return web.Response(text=self._robot_json(), content_type="application/json")
+        asset = self._asset(request.path)
+        if asset is None:
+            return web.Response(status=404, text="404: Not Found")
+        gzipped = asset.gzipped is not None and "gzip" in request.headers.get(
+            "Accept-Encoding", "")
+        etag = f'"{asset.etag}-gz"' if gzipped else f'"{asset.etag}"'
+        headers = {"ETag": etag, "Content-Type": asset.content_type}
+        if asset.gzipped is not None:
+            headers["Vary"] = "Accept-Encoding"
+        if etag in _etags(request.headers.get("If-None-Match", "")):
+            return web.Response(status=304, headers=headers)
+        if gzipped:
+            headers["Content-Encoding"] = "gzip"
+        return web.Response(body=asset.gzipped if gzipped else asset.body, headers=headers)
+
+    def _asset(self, url_path: str) -> _Asset | None:
+        """The published file ``url_path`` names, reread when changed (inode, mtime, size)."""
+        opened = open_published(self._web_dir, url_path)
+        if opened is None:
+            return None
+        fd, relative = opened
+        try:
+            with open(fd, "rb") as file:
+                info = os.fstat(fd)
+                key = (info.st_ino, info.st_mtime_ns, info.st_size)
+                cached = self._assets.get(relative)
+                if cached is not None and cached.key == key:
+                    return cached
+                body = file.read()
+        except OSError:
+            return None
+        suffix = os.path.splitext(relative)[1]
+        gzipped = None
+        if suffix in COMPRESSIBLE and len(body) >= GZIP_MIN_BYTES:
+            packed = gzip.compress(body, compresslevel=GZIP_LEVEL, mtime=0)
+            gzipped = packed if len(packed) < len(body) else None
+        asset = _Asset(key, body, gzipped, CONTENT_TYPES[suffix],
+                       f"{info.st_mtime_ns:x}-{info.st_size:x}")
+        self._assets[relative] = asset
+        return asset
+
+
+def _etags(header: str) -> list[str]:
+    """The entity tags of an If-None-Match header, weak ones compared as strong."""
+    return [tag.strip().removeprefix("W/") for tag in header.split(",")]
+
+
+async def start_http(host: str, port: int, directory: Path,
+                     health: Callable[[], dict[str, Any]],
+                     robot_json: Callable[[], str]) -> HttpServer:
+    """Serve the web interface on ``host:port`` on the running event loop.
+
+    Raises the process's soft open-file limit to the hard one first, and sizes the
+    connection cap from it.
+
+    Args:
+        host: address to bind ("" or "0.0.0.0" for every interface).
+        port: TCP port.
+        directory: the web folder (``web-interface/``).
+        health: the ``/healthz`` document, called on the loop per request.
+        robot_json: the ``/robot.json`` text (the live robot description), likewise.
+
+    Raises:
+        OSError: the port cannot be bound (in use, say).
+    """
+    cap = connection_cap(raise_open_file_limit())
+    server = HttpServer(directory, health, robot_json, cap)
+    log.debug("HTTP connections capped at %d", cap)
+    try:
+        await server.listen(host, port)
+    except OSError:
+        with contextlib.suppress(Exception):
+            await server.close()
+        raise
+    return server
