@@ -6,6 +6,12 @@ a raw rosbridge WebSocket client (``/odom``, ``/cmd_vel``, services), not in the
 pure frontend modules (PID, message conversions, connection, teleop) are unit-tested under
 Node's own test runner (``tests/web/*.test.mjs``).
 
+The page takes every robot fact (topics, limits, parameters) from ``web-interface/robot.json``;
+these tests read the same file rather than restating it. The admin token goes only to the
+page's own bridge (config.json's, else ws://<page host>:9090): since the test servers listen on
+free ports, the admin tests answer config.json naming the test server's bridge, as an
+instructor's config.json would.
+
 Screenshots go to ``test-artifacts/`` (gitignored). The PID test also writes the README's
 ``docs/screenshot.png`` when it is missing or ``UPDATE_SCREENSHOT=1`` is set, so an ordinary
 run leaves the committed picture alone.
@@ -32,12 +38,15 @@ from urllib.parse import urlsplit
 import pytest
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
+from websockets.sync.server import Request, ServerConnection, serve
 
 from chromium import launched_chromium, skip_reason
 from server_process import ADMIN_TOKEN, ServerProcess, free_port, start_server, wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
 WEB_DIR = ROOT / "web-interface"
+ROBOT = json.loads((WEB_DIR / "robot.json").read_text())
+"""The robot description the page loads (written by ``websim robot-json``)."""
 NODE_TESTS = sorted((Path(__file__).parent / "web").glob("*.test.mjs"))
 ARTIFACTS = ROOT / "test-artifacts"
 DOCS_SCREENSHOT = ROOT / "docs" / "screenshot.png"
@@ -52,8 +61,6 @@ SCAN_RGB = (225, 29, 72)
 """view.js COLORS.scan (#e11d48)."""
 WALL_RGB = (30, 41, 59)
 """view.js COLORS.wall (#1e293b)."""
-SPEED_MPS = 0.3
-"""The page's default linear speed slider value."""
 DEG = math.pi / 180
 
 
@@ -212,6 +219,41 @@ def page_url(server: ServerProcess, path: str = "/", **query: str) -> str:
     params = "&".join(f"{key}={value}" for key, value in {"ws": server.ws_url, **query}.items())
     return f"{server.http_url}{path}?{params}"
 
+
+def admin_context(browser: Any, server: ServerProcess, **context_options: Any) -> Any:
+    """A browser context whose pages get a config.json naming ``server``'s bridge as the
+    admin page's own (``adminWs``), as an instructor's config.json would: the admin token
+    goes to no other bridge."""
+    context = browser.new_context(**context_options)
+    config = {"ws": None, "adminWs": server.ws_url}
+    context.route(f"{server.http_url}/config.json", lambda route: route.fulfill(
+        status=200, content_type="application/json", body=json.dumps(config)))
+    return context
+
+
+@contextlib.contextmanager
+def recording_listener() -> Iterator[tuple[str, list[str]]]:
+    """A plain WebSocket server on a free port: records the path (with its query) of every
+    handshake and holds each connection open, answering nothing. Yields (its URL, the paths)."""
+    paths: list[str] = []
+
+    def record(connection: ServerConnection, request: Request) -> None:
+        paths.append(request.path)
+
+    def hold(connection: ServerConnection) -> None:
+        for _ in connection:
+            pass
+
+    port = free_port()
+    with serve(hold, "127.0.0.1", port, process_request=record) as listener:
+        thread = threading.Thread(target=listener.serve_forever, daemon=True)
+        thread.start()
+        try:
+            yield f"ws://127.0.0.1:{port}/", paths
+        finally:
+            listener.shutdown()
+            thread.join(timeout=5)
+
 @contextlib.contextmanager
 def driving_page(browser: Any, bridge: Bridge, url: str,
                  **context_options: Any) -> Iterator[tuple[Any, PageLog]]:
@@ -284,6 +326,7 @@ def test_page_loads_locally_without_errors_and_connects(server: ServerProcess,
         screenshot(page, "main-connected.png")
         assert log.console_errors == [] and log.page_errors == []
         assert any(url.endswith("/node_modules/uplot/dist/uPlot.esm.js") for url in log.requests)
+        assert f"{server.http_url}/robot.json" in log.requests
         assert log.foreign_requests() == []
     finally:
         context.close()
@@ -297,6 +340,8 @@ def test_holding_arrow_up_drives_and_releasing_stops(server: ServerProcess, brid
                                                      browser: Any) -> None:
     with driving_page(browser, bridge, page_url(server),
                       viewport={"width": 1280, "height": 860}) as (page, log):
+        speed_mps = float(page.input_value("#speed-linear"))  # a share of the robot's limit
+        assert 0 < speed_mps < ROBOT["robot"]["max_linear_mps"]  # scaled down
         commands_before = len(bridge.messages("/cmd_vel"))
         odoms_before = len(bridge.messages("/odom"))
         page.keyboard.down("ArrowUp")
@@ -308,12 +353,12 @@ def test_holding_arrow_up_drives_and_releasing_stops(server: ServerProcess, brid
         commands = twist_pairs(bridge.messages("/cmd_vel")[commands_before:])
         screenshot(page, "main-after-drive.png")
         assert log.console_errors == [] and log.page_errors == []
-    assert speed_of(moving) == pytest.approx(SPEED_MPS)
-    # About 1 s at 0.3 m/s: the key was held 1 s after the first motion, plus latency.
-    assert 0.25 < x_of(stopped) < 0.5
+    assert speed_of(moving) == pytest.approx(speed_mps)
+    # About 1 s at that speed: the key was held 1 s after the first motion, plus latency.
+    assert 0.8 * speed_mps < x_of(stopped) < 1.7 * speed_mps
     assert abs(yaw_of(stopped)) < 1e-9
     assert commands[-1] == (0.0, 0.0)  # a zero Twist on release
-    assert sum(1 for c in commands if c == (SPEED_MPS, 0.0)) >= 5  # 10 Hz while held
+    assert sum(1 for c in commands if c == (speed_mps, 0.0)) >= 5  # 10 Hz while held
 
 
 @needs_browser
@@ -468,31 +513,59 @@ def test_pid_panel_turns_the_robot_to_90_degrees(server: ServerProcess, bridge: 
     assert linear == [0.0] * len(linear)  # the PID only turns
 
 
+def runtime_parameters() -> list[dict[str, Any]]:
+    return [spec for spec in ROBOT["parameters"] if spec["runtime"]]
+
+
 @needs_browser
 def test_admin_changes_mass_with_the_token(server: ServerProcess, bridge: Bridge,
                                            browser: Any) -> None:
-    context = browser.new_context(viewport={"width": 1280, "height": 860})
+    context = admin_context(browser, server, viewport={"width": 1280, "height": 860})
     try:
-        page, log = open_page(context, page_url(server, "/admin", token=ADMIN_TOKEN))
+        page, log = open_page(context, f"{server.http_url}/admin?token={ADMIN_TOKEN}")
         wait_connected(page)
         assert "token" not in page.url  # stored, then taken out of the address bar
         assert page.evaluate("sessionStorage.getItem('websim.adminToken')") == ADMIN_TOKEN
+        assert f"{server.ws_url}?token={ADMIN_TOKEN}" in log.requests  # its own bridge got it
+        assert page.is_visible('#token-state[data-kind="ok"]')
         page.wait_for_selector("#params-form[data-loaded]")
-        assert page.input_value("#param-mass") == "1.2"
+        # The form is robot.json's runtime parameters, each bounded by its range.
+        fields = page.eval_on_selector_all("[data-param]", """inputs => inputs.map(
+            (input) => [input.dataset.param, input.min ?? '', input.max ?? ''])""")
+        assert [name for name, _, _ in fields] == [s["name"] for s in runtime_parameters()]
+        for (_, low, high), spec in zip(fields, runtime_parameters(), strict=True):
+            assert (float(low) if low else None) == spec["minimum"], spec["name"]
+            assert (float(high) if high else None) == spec["maximum"], spec["name"]
+        assert page.input_value("#param-mass_kg") == "1.2"
         assert page.input_value("#param-mode") == "kinematic"
-        page.fill("#param-mass", "2.5")
+        # Out of range: the browser refuses it, and nothing is sent.
+        page.evaluate("""() => {
+            const connection = window.websim.connection, call = connection.callService;
+            window.calls = [];
+            connection.callService = (name, ...rest) => {
+                window.calls.push(name);
+                return call.call(connection, name, ...rest);
+            };
+        }""")
+        mass = next(s for s in runtime_parameters() if s["name"] == "mass_kg")
+        page.fill("#param-mass_kg", str(mass["maximum"] * 10))
+        page.click("#params-apply")
+        assert page.evaluate("document.querySelector('#param-mass_kg').validity.rangeOverflow")
+        assert page.evaluate("window.calls") == []
+        page.fill("#param-mass_kg", "2.5")
         page.click("#params-apply")
         notice = page.wait_for_selector('#params-notice[data-kind="ok"]', timeout=10000)
         assert "mass_kg = 2.5" in notice.text_content()
+        assert page.evaluate("window.calls")[0] == ROBOT["services"]["set_parameters"]["name"]
         assert bridge.parameter("mass_kg") == 2.5
         page.reload()  # the token is asked once per tab: it is still there
         wait_connected(page)
         assert page.is_hidden("#token-form")
         page.wait_for_selector("#params-form[data-loaded]")
-        assert page.input_value("#param-mass") == "2.5"
+        assert page.input_value("#param-mass_kg") == "2.5"
         wait_for_odom_in_page(page)
         screenshot(page, "admin.png")
-        page.fill("#param-mass", "1.2")
+        page.fill("#param-mass_kg", "1.2")
         page.click("#params-apply")
         page.wait_for_selector('#params-notice[data-kind="ok"]', timeout=10000)
         assert log.console_errors == [] and log.page_errors == []
@@ -505,13 +578,13 @@ def test_admin_changes_mass_with_the_token(server: ServerProcess, bridge: Bridge
 @needs_browser
 def test_admin_without_the_token_shows_the_refusal(server: ServerProcess, bridge: Bridge,
                                                    browser: Any) -> None:
-    context = browser.new_context(viewport={"width": 1280, "height": 860})
+    context = admin_context(browser, server, viewport={"width": 1280, "height": 860})
     try:
-        page, _ = open_page(context, page_url(server, "/admin"))
+        page, _ = open_page(context, f"{server.http_url}/admin")
         wait_connected(page)
         assert page.is_visible("#token-form")
         page.wait_for_selector("#params-form[data-loaded]")
-        page.fill("#param-mass", "3")
+        page.fill("#param-mass_kg", "3")
         page.click("#params-apply")
         notice = page.wait_for_selector('#params-notice[data-kind="error"]', timeout=10000)
         assert "set_parameters needs admin rights" in notice.text_content()
@@ -520,7 +593,7 @@ def test_admin_without_the_token_shows_the_refusal(server: ServerProcess, bridge
         wait_connected(page)
         page.wait_for_selector("#params-form[data-loaded]")
         page.evaluate("document.querySelector('#params-notice').hidden = true")
-        page.fill("#param-mass", "3")
+        page.fill("#param-mass_kg", "3")
         page.click("#params-apply")
         notice = page.wait_for_selector('#params-notice[data-kind="error"]', timeout=10000)
         assert "needs admin rights" in notice.text_content()
@@ -530,6 +603,59 @@ def test_admin_without_the_token_shows_the_refusal(server: ServerProcess, bridge
     finally:
         context.close()
     assert bridge.parameter("mass_kg") == 1.2
+
+
+@needs_browser
+def test_admin_sends_no_token_to_a_bridge_named_by_a_link(server: ServerProcess,
+                                                           browser: Any) -> None:
+    with recording_listener() as (other_url, paths):
+        context = admin_context(browser, server, viewport={"width": 1280, "height": 860})
+        try:
+            page, log = open_page(context, f"{server.http_url}/admin?token={ADMIN_TOKEN}")
+            wait_connected(page)  # the instructor's tab holds the token now
+            page.goto(f"{server.http_url}/admin?ws={other_url}")  # then follows a link
+            wait_connected(page)
+            notice = page.wait_for_selector('#token-state[data-kind="warn"]', timeout=5000)
+            text = notice.text_content() or ""
+            assert f"Connected to {other_url} from the link" in text
+            assert "your admin token is only sent to this page's own server" in text
+            assert server.ws_url in text
+            page.click("#token-forget")  # a token typed into the form is not sent there either
+            wait_for(lambda: len(paths) >= 2, what="the reconnect without a token")
+            page.fill("#token-input", "typed-token")
+            page.click("#token-form button[type=submit]")
+            wait_for(lambda: len(paths) >= 3, what="the reconnect after typing a token")
+            wait_connected(page)
+            assert page.is_visible('#token-state[data-kind="warn"]')
+            screenshot(page, "admin-linked-bridge.png")
+            page.fill("#ws-url", server.ws_url)  # the own bridge, typed: it gets the token
+            page.click("#connect-form button[type=submit]")
+            wait_connected(page)
+            page.wait_for_selector('#token-state[data-kind="ok"]', timeout=5000)
+            assert f"{server.ws_url}?token=typed-token" in log.requests
+        finally:
+            context.close()
+    assert len(paths) >= 3
+    assert [path for path in paths if "token=" in path] == []
+    assert [url for url in log.requests if url.startswith(other_url) and "token=" in url] == []
+
+
+@needs_browser
+def test_pages_without_robot_json_say_so_and_guess_nothing(server: ServerProcess,
+                                                           browser: Any) -> None:
+    context = browser.new_context()
+    context.route(f"{server.http_url}/robot.json",
+                  lambda route: route.fulfill(status=404, body="missing"))
+    try:
+        for path in ("/", "/admin"):
+            page, log = open_page(context, page_url(server, path))
+            banner = page.wait_for_selector("#fatal:not([hidden])", timeout=10000)
+            assert "robot.json" in (banner.text_content() or ""), path
+            assert "HTTP 404" in (banner.text_content() or ""), path
+            assert [url for url in log.requests if url.startswith("ws")] == [], path
+            assert log.page_errors == [], path
+    finally:
+        context.close()
 
 
 @needs_browser

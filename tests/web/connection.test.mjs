@@ -1,11 +1,12 @@
-// The rosbridge connection (web-interface/js/connection.js): URLs, tokens, backoff, and the
-// reconnect cycle against a fake roslibjs.
+// The rosbridge connection (web-interface/js/connection.js): URLs, tokens (and which bridge may
+// get one), backoff, and the reconnect cycle against a fake roslibjs.
 import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  Connection, defaultWsUrl, initialWsUrl, loadSiteConfig, resolveWsUrl, retryDelayMs,
-  RETRY_MAX_MS, ServiceCallError, takeToken, TOKEN_KEY, withoutToken, withToken,
+  Connection, defaultWsUrl, initialWsUrl, linkedWsUrl, loadSiteConfig, ownWsUrl, resolveWsUrl,
+  retryDelayMs, RETRY_MAX_MS, sameBridge, ServiceCallError, takeToken, tokenFor, TOKEN_KEY,
+  withoutToken, withToken,
 } from '../../web-interface/js/connection.js';
 import { fakeRoslib } from './fake-roslib.mjs';
 
@@ -56,6 +57,64 @@ test('?token= is stored for the tab and removed from the address bar', () => {
   assert.equal(replaced.length, 1);
 });
 
+test('the own bridge is config.json\'s or the default, never the address bar\'s ?ws=', () => {
+  const page = { protocol: 'http:', hostname: 'lab', host: 'lab:8080', search: '' };
+  const linked = { ...page, search: '?ws=ws%3A%2F%2Fevil%3A9090&token=t' };
+  assert.equal(ownWsUrl(page), 'ws://lab:9090');
+  assert.equal(ownWsUrl(linked), 'ws://lab:9090');
+  assert.equal(ownWsUrl(linked, '/admin/rosbridge'), 'ws://lab:8080/admin/rosbridge');
+  assert.equal(ownWsUrl(page, '  '), 'ws://lab:9090');
+  assert.equal(linkedWsUrl(page), null);
+  assert.equal(linkedWsUrl(linked), 'ws://evil:9090');
+  assert.equal(linkedWsUrl({ ...page, search: '?ws=/rosbridge' }), 'ws://lab:8080/rosbridge');
+  assert.equal(initialWsUrl(linked, '/admin/rosbridge'), 'ws://evil:9090');
+});
+
+test('the same bridge: equal once parsed, trailing slash and fragment aside', () => {
+  assert.equal(sameBridge('ws://h:9090', 'ws://h:9090/'), true);
+  assert.equal(sameBridge('ws://H:9090/#x', 'ws://h:9090'), true);
+  assert.equal(sameBridge('ws://h:80/', 'ws://h'), true); // the default port
+  assert.equal(sameBridge('wss://h:9090', 'ws://h:9090'), false);
+  assert.equal(sameBridge('ws://h:9091', 'ws://h:9090'), false);
+  assert.equal(sameBridge('ws://h:9090/admin', 'ws://h:9090/'), false);
+  assert.equal(sameBridge('ws://h:9090/?a=1', 'ws://h:9090/'), false);
+  assert.equal(sameBridge('ws://user@h:9090', 'ws://h:9090'), false);
+  assert.equal(sameBridge('ws://h.evil:9090', 'ws://h:9090'), false);
+  assert.equal(sameBridge('ws://localhost:9090', 'ws://127.0.0.1:9090'), false); // as typed
+  assert.equal(sameBridge('nonsense', 'nonsense'), false);
+  assert.equal(sameBridge('ws://h:9090', null), false);
+});
+
+test('the admin token goes only to the page\'s own bridge', () => {
+  const own = 'ws://lab:9090';
+  assert.equal(tokenFor('ws://lab:9090/', own, 's3cret'), 's3cret');
+  assert.equal(tokenFor('ws://elsewhere:9090', own, 's3cret'), '');
+  assert.equal(tokenFor('ws://lab:9091', own, 's3cret'), '');
+  assert.equal(tokenFor('ws://lab:9090', null, 's3cret'), ''); // no own bridge: nobody
+  assert.equal(tokenFor('ws://lab:9090', own, ''), '');
+});
+
+test('a Connection withholds the token from any other bridge, typed or linked', () => {
+  const { ROSLIB, sockets } = fakeRoslib();
+  const own = 'ws://lab:9090';
+  const linked = new Connection(ROSLIB, { url: 'ws://evil:9090', token: 'tok', tokenUrl: own });
+  assert.equal(linked.sendsToken, false);
+  linked.connect();
+  linked.connect(linked.url, 'typed-token'); // a token typed into the form
+  assert.deepEqual(sockets.map((s) => s.url), ['ws://evil:9090', 'ws://evil:9090']);
+  linked.connect('ws://lab:9090/'); // the Bridge field: the page's own bridge, typed
+  assert.equal(linked.sendsToken, true);
+  linked.connect('ws://lab:9091'); // a near miss
+  assert.equal(linked.sendsToken, false);
+  assert.deepEqual(sockets.slice(2).map((s) => s.url),
+    ['ws://lab:9090/?token=typed-token', 'ws://lab:9091']);
+  const noOwn = new Connection(ROSLIB, { url: own, token: 'tok' });
+  noOwn.connect();
+  assert.equal(sockets.at(-1).url, own); // without tokenUrl the token goes nowhere
+  linked.close();
+  noOwn.close();
+});
+
 test('backoff doubles from 0.5 s to at most 5 s, with +-20 % jitter', () => {
   const middle = () => 0.5;
   assert.deepEqual([0, 1, 2, 3, 4, 10].map((a) => retryDelayMs(a, middle)),
@@ -67,7 +126,9 @@ test('backoff doubles from 0.5 s to at most 5 s, with +-20 % jitter', () => {
 test('reconnects after a close, re-subscribes, and drops publishes while down', (t) => {
   t.mock.timers.enable({ apis: ['setTimeout'] });
   const { ROSLIB, sockets } = fakeRoslib();
-  const connection = new Connection(ROSLIB, { url: 'ws://h:9090', token: 'tok' });
+  const connection = new Connection(ROSLIB, {
+    url: 'ws://h:9090', token: 'tok', tokenUrl: 'ws://h:9090',
+  });
   const statuses = [];
   connection.addEventListener('status', (e) => statuses.push(e.detail.status));
   const received = [];

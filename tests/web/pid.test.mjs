@@ -6,8 +6,13 @@ import { test } from 'node:test';
 import {
   CONTROL_PERIOD_S, INITIAL_STATE, makeGains, pidStep, wrapAngle,
 } from '../../web-interface/js/pid.js';
+import { robot } from './robot.mjs';
 
 const DEG = Math.PI / 180;
+/** Gains with the robot's yaw-rate limit (robot.json), as the page's PID panel makes them. */
+const withLimit = (fields = {}) => makeGains({
+  outputLimit: robot.robot.max_angular_rps, ...fields,
+});
 const close = (actual, expected, tol = 1e-12) => assert.ok(
   Math.abs(actual - expected) <= tol, `${actual} is not within ${tol} of ${expected}`);
 
@@ -23,7 +28,7 @@ test('wrapAngle maps into (-pi, pi]', () => {
 });
 
 test('proportional step: output = kp * error', () => {
-  const step = pidStep(makeGains({ kp: 2 }), INITIAL_STATE, 0.5, 0.25);
+  const step = pidStep(withLimit({ kp: 2 }), INITIAL_STATE, 0.5, 0.25);
   close(step.error, 0.25);
   close(step.output, 0.5);
   assert.equal(step.saturated, false);
@@ -33,7 +38,7 @@ test('proportional step: output = kp * error', () => {
 
 test('the error takes the shortest way round', () => {
   // From -170 deg to 170 deg is 20 deg clockwise, not 340 deg counter-clockwise.
-  const step = pidStep(makeGains({ kp: 1 }), INITIAL_STATE, 170 * DEG, -170 * DEG);
+  const step = pidStep(withLimit({ kp: 1 }), INITIAL_STATE, 170 * DEG, -170 * DEG);
   close(step.error, -20 * DEG, 1e-12);
   assert.ok(step.output < 0);
 });
@@ -67,7 +72,7 @@ test('a wound-up integral still unwinds once the error turns', () => {
 });
 
 test('derivative acts on the measurement: a setpoint jump gives no kick', () => {
-  const gains = makeGains({ kp: 0, kd: 1 });
+  const gains = withLimit({ kp: 0, kd: 1 });
   const still = pidStep(gains, { integral: 0, previousHeading: 0.2 }, 1.5, 0.2);
   assert.equal(still.output, 0);
   // Heading rising 0.1 rad in 0.1 s: derivative term -kd * 1 rad/s.
@@ -93,22 +98,23 @@ function simulate(gains, setpoint, seconds, disturbance = 0) {
 }
 
 test('closed loop, P only: 90 deg reached without overshoot', () => {
-  const headings = simulate(makeGains({ kp: 2 }), 90 * DEG, 6);
+  const headings = simulate(withLimit({ kp: 2 }), 90 * DEG, 6);
   close(headings.at(-1), 90 * DEG, 0.5 * DEG);
   assert.ok(Math.max(...headings) <= 90 * DEG + 1e-9);
 });
 
 test('closed loop: the integral removes the steady-state error of a disturbance', () => {
   const disturbance = -0.2; // rad/s, e.g. a dragging wheel
-  const p = simulate(makeGains({ kp: 2 }), 90 * DEG, 20, disturbance);
+  const p = simulate(withLimit({ kp: 2 }), 90 * DEG, 20, disturbance);
   close(p.at(-1), 90 * DEG + disturbance / 2, 1e-3); // P leaves d / kp
-  const pi = simulate(makeGains({ kp: 2, ki: 1 }), 90 * DEG, 20, disturbance);
+  const pi = simulate(withLimit({ kp: 2, ki: 1 }), 90 * DEG, 20, disturbance);
   close(pi.at(-1), 90 * DEG, 1e-3);
 });
 
 test('gains are validated', () => {
-  assert.throws(() => makeGains({ kp: -1 }), /kp/);
-  assert.throws(() => makeGains({ ki: Number.NaN }), /ki/);
+  assert.throws(() => withLimit({ kp: -1 }), /kp/);
+  assert.throws(() => withLimit({ ki: Number.NaN }), /ki/);
+  assert.throws(() => makeGains({ kp: 1 }), /outputLimit/); // no default: the robot's
   assert.throws(() => makeGains({ outputLimit: 0 }), /outputLimit/);
-  assert.throws(() => pidStep(makeGains(), INITIAL_STATE, Number.NaN, 0), /finite/);
+  assert.throws(() => pidStep(withLimit(), INITIAL_STATE, Number.NaN, 0), /finite/);
 });

@@ -3,9 +3,10 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  applyMarkerArray, composePose, markerBounds, MARKER, parameterValue, PARAM, poseFromOdometry,
+  applyMarkerArray, composePose, markerBounds, MARKER, parameterValue, poseFromOdometry,
   scanPoints, stampSeconds, transformFromTf, twist, valueOfParameter, yawFromQuaternion,
 } from '../../web-interface/js/ros-msgs.js';
+import { robot } from './robot.mjs';
 
 const close = (actual, expected, tol = 1e-9) => assert.ok(
   Math.abs(actual - expected) <= tol, `${actual} is not within ${tol} of ${expected}`);
@@ -116,12 +117,23 @@ test('a marker pose moves and turns its points', () => {
   close(y2, 1);
 });
 
-test('ParameterValue both ways, by type code', () => {
-  assert.deepEqual(parameterValue(2.5), { type: PARAM.DOUBLE, double_value: 2.5 });
-  assert.deepEqual(parameterValue('dynamic'), { type: PARAM.STRING, string_value: 'dynamic' });
-  assert.equal(valueOfParameter({ type: 3, double_value: 1.2, string_value: '' }), 1.2);
-  assert.equal(valueOfParameter({ type: 4, double_value: 0, string_value: 'kinematic' }),
-    'kinematic');
-  assert.equal(valueOfParameter({ type: 0 }), undefined);
-  assert.throws(() => parameterValue(null), TypeError);
+test('ParameterValue both ways, by robot.json\'s type codes', () => {
+  const types = robot.parameter_types;
+  assert.deepEqual(parameterValue(types, types.DOUBLE, 2.5),
+    { type: types.DOUBLE, double_value: 2.5 });
+  assert.deepEqual(parameterValue(types, types.STRING, 'dynamic'),
+    { type: types.STRING, string_value: 'dynamic' });
+  assert.deepEqual(parameterValue(types, types.INTEGER, 7),
+    { type: types.INTEGER, integer_value: 7 });
+  assert.deepEqual(parameterValue(types, types.BOOL, false),
+    { type: types.BOOL, bool_value: false });
+  assert.equal(valueOfParameter(types, { type: types.DOUBLE, double_value: 1.2, string_value: '' }),
+    1.2);
+  assert.equal(valueOfParameter(types,
+    { type: types.STRING, double_value: 0, string_value: 'kinematic' }), 'kinematic');
+  assert.equal(valueOfParameter(types, { type: types.NOT_SET }), undefined);
+  assert.equal(valueOfParameter(types, { type: 99 }), undefined);
+  assert.throws(() => parameterValue(types, types.DOUBLE, null), TypeError);
+  assert.throws(() => parameterValue(types, types.INTEGER, 1.5), TypeError);
+  assert.throws(() => parameterValue(types, types.NOT_SET, 1), TypeError);
 });

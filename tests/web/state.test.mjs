@@ -52,8 +52,8 @@ test('plot history keeps the last 20 s of stamps, one sample per /odom', () => {
 test('message rates over the last two seconds', () => {
   const state = createState();
   for (let i = 0; i < 100; i += 1) onOdometry(state, odometry(0, 0, 1 + i / 20), i * 50);
-  assert.equal(rateHz(state, '/odom', 99 * 50), 20.5); // 41 arrivals within 2000 ms inclusive
-  assert.equal(rateHz(state, '/scan', 99 * 50), 0);
+  assert.equal(rateHz(state, 'odom', 99 * 50), 20.5); // 41 arrivals within 2000 ms inclusive
+  assert.equal(rateHz(state, 'scan', 99 * 50), 0);
 });
 
 test('a world message bumps the version and the bounds', () => {

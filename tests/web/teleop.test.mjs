@@ -7,6 +7,7 @@ import {
   keyDemand, keysBelongToElement, PUBLISH_PERIOD_MS, Teleop,
 } from '../../web-interface/js/teleop.js';
 import { createState } from '../../web-interface/js/state.js';
+import { robot } from './robot.mjs';
 
 test('arrow keys and WASD: forward, back, turn left (+z), turn right (-z), combined', () => {
   assert.deepEqual(keyDemand(new Set(['ArrowUp'])), [1, 0]);
@@ -32,21 +33,33 @@ test('text fields, selects and sliders keep the keys; buttons do not', () => {
 
 function fakeConnection() {
   const sent = [];
+  const publishers = [];
   const connection = new EventTarget();
-  connection.publisher = () => ({
-    publish: (msg) => {
-      sent.push([msg.linear.x, msg.angular.z]);
-      return true;
-    },
-  });
-  return { connection, sent };
+  connection.publisher = (topic, type) => {
+    publishers.push([topic, type]);
+    return {
+      publish: (msg) => {
+        sent.push([msg.linear.x, msg.angular.z]);
+        return true;
+      },
+    };
+  };
+  return { connection, sent, publishers };
 }
+
+test('teleop publishes on robot.json\'s cmd_vel and starts below its limits', () => {
+  const { connection, publishers } = fakeConnection();
+  const teleop = new Teleop(connection, createState(), robot);
+  assert.deepEqual(publishers, [[robot.topics.cmd_vel.name, robot.topics.cmd_vel.type]]);
+  assert.ok(teleop.speed.linear > 0 && teleop.speed.linear < robot.robot.max_linear_mps);
+  assert.ok(teleop.speed.angular > 0 && teleop.speed.angular < robot.robot.max_angular_rps);
+});
 
 test('publishes at once, every 100 ms while held, and a zero on release', (t) => {
   t.mock.timers.enable({ apis: ['setInterval'] });
   const { connection, sent } = fakeConnection();
   const state = createState();
-  const teleop = new Teleop(connection, state);
+  const teleop = new Teleop(connection, state, robot);
   teleop.speed = { linear: 0.4, angular: 2 };
   let drives = 0;
   teleop.addEventListener('drive', () => { drives += 1; });
@@ -72,7 +85,7 @@ test('publishes at once, every 100 ms while held, and a zero on release', (t) =>
 test('stop and a disconnect the page asks for send a zero Twist', (t) => {
   t.mock.timers.enable({ apis: ['setInterval'] });
   const { connection, sent } = fakeConnection();
-  const teleop = new Teleop(connection, createState());
+  const teleop = new Teleop(connection, createState(), robot);
   teleop.set('keys', 1, 0);
   teleop.stop();
   assert.deepEqual(sent.at(-1), [0, 0]);

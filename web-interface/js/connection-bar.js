@@ -3,15 +3,17 @@
 
 import { resolveWsUrl } from './connection.js';
 
-const WAITING_MS = 2000; // connected but no /odom for this long: say so
+const WAITING_MS = 2000; // connected but no odometry for this long: say so
 
 /**
  * @param {Connection} connection
  * @param {{form: HTMLFormElement, input: HTMLInputElement, status: HTMLElement,
  *          message: HTMLElement}} elements
+ * @param {object} robot the robot description (robot.js): the odometry topic it waits for
  * @returns {{update: (nowMs: number, state: object) => void}}
  */
-export function bindConnectionBar(connection, { form, input, status, message }) {
+export function bindConnectionBar(connection, { form, input, status, message }, robot) {
+  const odomTopic = robot.topics.odom.name;
   let connectedAtMs = null;
   input.value = connection.url;
   form.addEventListener('submit', (event) => {
@@ -39,7 +41,7 @@ export function bindConnectionBar(connection, { form, input, status, message }) 
       if (!connection.isConnected) {
         show(connection.message);
       } else if (nowMs - Math.max(connectedAtMs ?? 0, state.odomAtMs) > WAITING_MS) {
-        show(`Connected to ${connection.url}, but no /odom arrives: is the robot running?`);
+        show(`Connected to ${connection.url}, but no ${odomTopic} arrives: is the robot running?`);
       } else {
         show('');
       }

@@ -39,17 +39,51 @@ export function resolveWsUrl(value, location) {
 }
 
 /**
- * The WebSocket URL a page starts with: its ?ws= parameter, else `configured` (config.json's
- * choice for this site), else defaultWsUrl().
+ * The bridge of the page's own server: `configured` (config.json's choice for this site, set
+ * by whoever runs the server), else defaultWsUrl(). The one bridge the admin token goes to.
  */
+export function ownWsUrl(location, configured = null) {
+  return typeof configured === 'string' && configured.trim()
+    ? resolveWsUrl(configured, location) : defaultWsUrl(location);
+}
+
+/** The bridge the address bar's ?ws= names (resolved like any bridge address), or null. */
+export function linkedWsUrl(location) {
+  const value = new URLSearchParams(location.search).get('ws');
+  return value && value.trim() ? resolveWsUrl(value, location) : null;
+}
+
+/** The WebSocket URL a page starts with: its ?ws= parameter, else ownWsUrl(). */
 export function initialWsUrl(location, configured = null) {
-  const fromQuery = new URLSearchParams(location.search).get('ws');
-  for (const candidate of [fromQuery, configured]) {
-    if (typeof candidate === 'string' && candidate.trim()) {
-      return resolveWsUrl(candidate, location);
+  return linkedWsUrl(location) ?? ownWsUrl(location, configured);
+}
+
+/**
+ * True when the WebSocket URLs `a` and `b` name the same bridge: equal once parsed (scheme,
+ * user, host, port and path, query; `ws://h:9090` is `ws://h:9090/`), the fragment aside.
+ * False when either is not a URL.
+ */
+export function sameBridge(a, b) {
+  const parse = (text) => {
+    try {
+      const url = new URL(String(text).trim());
+      url.hash = '';
+      return url.href;
+    } catch {
+      return null;
     }
-  }
-  return defaultWsUrl(location);
+  };
+  const first = parse(a);
+  return first !== null && first === parse(b);
+}
+
+/**
+ * The admin token to send to the bridge at `url`: `token` when `url` is `ownUrl`, the page's
+ * own bridge (ownWsUrl()), else ''. A bridge named by a link or typed into the page never
+ * gets it: anybody can send an instructor a link.
+ */
+export function tokenFor(url, ownUrl, token) {
+  return token && ownUrl && sameBridge(url, ownUrl) ? token : '';
 }
 
 /**
@@ -119,18 +153,20 @@ export class ServiceCallError extends Error {
  * Events (EventTarget): 'status' with detail {status, url, message}, where status is one of
  * connecting, connected, closed, error; 'connected'; 'disconnected'; 'beforeclose' (sent
  * while still connected, before the page closes the socket itself: last words such as a zero
- * /cmd_vel go there).
+ * velocity command go there).
  */
 export class Connection extends EventTarget {
   /**
    * @param {object} ROSLIB the roslibjs namespace
-   * @param {{url: string, token?: string}} options token: admin token for ?token= (never shown)
+   * @param {{url: string, token?: string, tokenUrl?: string}} options token: the admin token,
+   *   sent as ?token= (never shown) only to tokenUrl, the page's own bridge (tokenFor())
    */
-  constructor(ROSLIB, { url, token = '' }) {
+  constructor(ROSLIB, { url, token = '', tokenUrl = null }) {
     super();
     this.ROSLIB = ROSLIB;
     this.url = url;
     this.token = token;
+    this.tokenUrl = tokenUrl;
     this.status = 'closed';
     this.message = '';
     this._ros = null;
@@ -143,6 +179,11 @@ export class Connection extends EventTarget {
 
   get isConnected() {
     return this.status === 'connected';
+  }
+
+  /** True when the current bridge gets the token: the page has one and this is its own bridge. */
+  get sendsToken() {
+    return Boolean(tokenFor(this.url, this.tokenUrl, this.token));
   }
 
   /** Connects (or reconnects now) to `url`, or to the current URL. */
@@ -224,7 +265,8 @@ export class Connection extends EventTarget {
     let ros;
     const shownUrl = withoutToken(this.url);
     try {
-      ros = new this.ROSLIB.Ros({ url: withToken(this.url, this.token) });
+      const token = tokenFor(this.url, this.tokenUrl, this.token); // the one place it is sent
+      ros = new this.ROSLIB.Ros({ url: withToken(this.url, token) });
     } catch (error) {
       this._wanted = false;
       this._setStatus('error', `"${shownUrl}" is not a WebSocket URL (${error.message})`);

@@ -8,25 +8,27 @@ import { LivePlots } from './plots.js';
 import { PidPanel } from './pid-panel.js';
 import { Readouts } from './readouts.js';
 import {
-  $, closeWithPage, createTeleop, createView, librariesLoaded, showFatal, subscribeRobot,
+  $, closeWithPage, createTeleop, createView, librariesLoaded, robotDescription, showFatal,
+  subscribeRobot,
 } from './page.js';
 
 async function main() {
   if (!librariesLoaded()) return;
-  const config = await loadSiteConfig();
+  const [config, robot] = await Promise.all([loadSiteConfig(), robotDescription()]);
+  if (!robot) return;
   const state = createState();
   const connection = new Connection(ROSLIB, { url: initialWsUrl(window.location, config.ws) });
   const bar = bindConnectionBar(connection, {
     form: $('#connect-form'), input: $('#ws-url'), status: $('#conn-status'),
     message: $('#view-message'),
-  });
-  subscribeRobot(connection, state);
-  const view = createView(state);
-  const { teleop, limits } = createTeleop(connection, state);
+  }, robot);
+  subscribeRobot(connection, state, robot);
+  const view = createView(state, robot);
+  const { teleop, limits } = createTeleop(connection, state, robot);
   const plots = new LivePlots($('#plots'), state, ['linear', 'angular']);
   const headingPlot = new LivePlots($('#heading-plot'), state, ['heading']);
-  const readouts = new Readouts(connection, state, $('#readouts'));
-  const pid = new PidPanel(connection, state, {
+  const readouts = new Readouts(connection, state, $('#readouts'), robot);
+  const pid = new PidPanel(connection, state, robot, {
     form: $('#pid-form'), kp: $('#pid-kp'), ki: $('#pid-ki'), kd: $('#pid-kd'),
     setpoint: $('#pid-setpoint'), toggle: $('#pid-toggle'), status: $('#pid-status'),
     error: $('#pid-error'), output: $('#pid-output'),
@@ -38,7 +40,7 @@ async function main() {
     (now) => headingPlot.update(now),
     (now) => readouts.update(now), (now) => bar.update(now, state));
   connection.connect();
-  window.websim = { connection, state, view, teleop, pid }; // for the browser's console
+  window.websim = { connection, robot, state, view, teleop, pid }; // for the browser's console
 }
 
 main().catch((error) => showFatal(`The page could not start: ${error.message}`));

@@ -1,5 +1,6 @@
 // What both pages share: the robot's subscriptions, the view with its buttons, teleop with its
-// controls, and the page-wide error banner. The pages (main.js, admin.js) only wire them.
+// controls, and the page-wide error banner. The pages (main.js, admin.js) only wire them. The
+// robot's topics and limits come from its description (robot.js), passed in as `robot`.
 
 import { missingLibraries, nipplejs } from './vendor.js';
 import {
@@ -8,23 +9,26 @@ import {
 import { twistValues } from './ros-msgs.js';
 import { View } from './view.js';
 import {
-  bindButtons, bindJoystick, bindKeys, bindSpeedSliders, DEFAULT_LIMITS, Teleop,
+  bindButtons, bindJoystick, bindKeys, bindSpeedSliders, Teleop,
 } from './teleop.js';
 import { speedLimits } from './params.js';
+import { loadRobot, robotLimits } from './robot.js';
 
 export const $ = (selector) => document.querySelector(selector);
 
 /** Subscribes the state to the robot's topics; absent ones (a real robot) simply stay quiet. */
-export function subscribeRobot(connection, state) {
+export function subscribeRobot(connection, state, robot) {
   const now = () => performance.now();
-  connection.subscribe('/odom', 'nav_msgs/msg/Odometry', (m) => onOdometry(state, m, now()));
-  connection.subscribe('/ground_truth', 'nav_msgs/msg/Odometry',
-    (m) => onGroundTruth(state, m, now()));
-  connection.subscribe('/scan', 'sensor_msgs/msg/LaserScan', (m) => onScan(state, m, now()));
-  connection.subscribe('/tf_static', 'tf2_msgs/msg/TFMessage', (m) => onTfStatic(state, m),
-    { queueLength: 10 });
-  connection.subscribe('/world', 'visualization_msgs/msg/MarkerArray', (m) => onWorld(state, m));
-  connection.subscribe('/cmd_vel', 'geometry_msgs/msg/Twist', (m) => {
+  const on = (key, onMessage, options) => {
+    const { name, type } = robot.topics[key];
+    connection.subscribe(name, type, onMessage, options);
+  };
+  on('odom', (m) => onOdometry(state, m, now()));
+  on('ground_truth', (m) => onGroundTruth(state, m, now()));
+  on('scan', (m) => onScan(state, m, now()));
+  on('tf_static', (m) => onTfStatic(state, m), { queueLength: 10 });
+  on('world', (m) => onWorld(state, m));
+  on('cmd_vel', (m) => {
     const { linear, angular } = twistValues(m); // any client's command: what the robot obeys
     onCommand(state, linear, angular);
   });
@@ -32,9 +36,9 @@ export function subscribeRobot(connection, state) {
 }
 
 /** A view with its follow and reset buttons. */
-export function createView(state) {
+export function createView(state, robot) {
   const follow = $('#follow');
-  const view = new View($('#view'), state, {
+  const view = new View($('#view'), state, robot, {
     onFollowChange: (on) => follow.setAttribute('aria-pressed', String(on)),
   });
   follow.addEventListener('click', () => view.setFollow(!view.follow));
@@ -42,9 +46,13 @@ export function createView(state) {
   return view;
 }
 
-/** Teleop with keys, buttons, sliders and (on touch screens) the joystick. */
-export function createTeleop(connection, state) {
-  const teleop = new Teleop(connection, state);
+/**
+ * Teleop with keys, buttons, sliders and (on touch screens) the joystick. Returns {teleop,
+ * limits}: limits are the robot's speed limits now, robot.json's until the live parameters
+ * arrive on connecting.
+ */
+export function createTeleop(connection, state, robot) {
+  const teleop = new Teleop(connection, state, robot);
   bindKeys(teleop);
   bindButtons(teleop, $('#drive-pad'));
   const zone = $('#joystick');
@@ -52,15 +60,15 @@ export function createTeleop(connection, state) {
     zone.hidden = false;
     bindJoystick(teleop, zone, nipplejs);
   }
+  const limits = robotLimits(robot);
   const sliders = bindSpeedSliders(teleop, {
     linear: $('#speed-linear'),
     angular: $('#speed-angular'),
     linearOut: $('#speed-linear-value'),
     angularOut: $('#speed-angular-value'),
-  });
-  const limits = { ...DEFAULT_LIMITS };
+  }, limits);
   connection.addEventListener('connected', async () => {
-    Object.assign(limits, await speedLimits(connection));
+    Object.assign(limits, await speedLimits(connection, robot));
     sliders.setLimits(limits);
   });
   return { teleop, limits };
@@ -73,6 +81,19 @@ export function showFatal(text) {
   banner.hidden = false;
 }
 
+/**
+ * The robot's description from robot.json (robot.js), or null after saying on the page why
+ * it could not be loaded: the page never guesses the robot's topics or limits.
+ */
+export async function robotDescription() {
+  try {
+    return await loadRobot();
+  } catch (error) {
+    showFatal(error.message);
+    return null;
+  }
+}
+
 /** True when the npm libraries loaded; otherwise says on the page how to install them. */
 export function librariesLoaded() {
   const missing = missingLibraries();
@@ -83,7 +104,7 @@ export function librariesLoaded() {
   return missing.length === 0;
 }
 
-/** Closes the connection (a zero /cmd_vel first) when the page goes, reopens it on return. */
+/** Closes the connection (a zero velocity command first) when the page goes; reopens it. */
 export function closeWithPage(connection) {
   window.addEventListener('pagehide', () => connection.close());
   window.addEventListener('pageshow', (event) => {

@@ -1,5 +1,6 @@
 // The heading PID panel: gains and setpoint from the form, the controller (pid.js) run at 10 Hz
-// in the browser, from /odom's yaw to /cmd_vel's angular.z (linear 0).
+// in the browser, from the odometry's yaw to the velocity command's angular.z (linear 0); the
+// topics are the robot description's (robot.json).
 
 import { CONTROL_PERIOD_S, INITIAL_STATE, makeGains, pidStep } from './pid.js';
 import { onCommand } from './state.js';
@@ -12,17 +13,20 @@ const DEG = Math.PI / 180;
 
 /**
  * Events: 'start', 'stop'.
+ * @param {object} robot the robot description (robot.js)
  * @param {object} elements {form, kp, ki, kd, setpoint, toggle, status, error, output}
  * @param {() => number} outputLimit the robot's max_angular_rps now
  */
 export class PidPanel extends EventTarget {
-  constructor(connection, state, elements, outputLimit) {
+  constructor(connection, state, robot, elements, outputLimit) {
     super();
     this.connection = connection;
     this.state = state;
     this.el = elements;
     this.outputLimit = outputLimit;
-    this.cmdVel = connection.publisher('/cmd_vel', 'geometry_msgs/msg/Twist');
+    this.odomTopic = robot.topics.odom.name;
+    const { name, type } = robot.topics.cmd_vel;
+    this.cmdVel = connection.publisher(name, type);
     this.timer = null;
     this.memory = INITIAL_STATE;
     this.formError = null;
@@ -96,7 +100,7 @@ export class PidPanel extends EventTarget {
     if (!odom || performance.now() - this.state.odomAtMs > ODOM_STALE_MS) {
       this.memory = INITIAL_STATE;
       this._send(0);
-      this.el.status.textContent = 'waiting for /odom';
+      this.el.status.textContent = `waiting for ${this.odomTopic}`;
       return;
     }
     const step = pidStep(this.gains, this.memory, this.setpointDeg * DEG, odom.theta);

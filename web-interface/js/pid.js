@@ -26,10 +26,10 @@ export function wrapAngle(angleRad) {
 /**
  * Gains and limits, validated.
  * kp (rad/s per rad), ki (rad/s per rad s), kd (rad/s per rad/s): finite and >= 0;
- * outputLimit: the largest yaw rate command (rad/s), e.g. max_angular_rps; finite and > 0.
- * Throws RangeError naming the bad field.
+ * outputLimit: the largest yaw rate command (rad/s), the robot's max_angular_rps; no default,
+ * finite and > 0. Throws RangeError naming the bad field.
  */
-export function makeGains({ kp = 2.0, ki = 0.0, kd = 0.0, outputLimit = 2.5 } = {}) {
+export function makeGains({ kp = 2.0, ki = 0.0, kd = 0.0, outputLimit } = {}) {
   for (const [name, value] of Object.entries({ kp, ki, kd })) {
     if (!Number.isFinite(value) || value < 0) {
       throw new RangeError(`${name} must be a finite number >= 0, got ${value}`);

@@ -10,10 +10,12 @@ export class Readouts {
   /**
    * @param {HTMLElement} root holds <output data-readout="NAME"> elements: x, y, theta, v,
    *   omega, time, odomRate, scanRate, latency (any may be absent)
+   * @param {object} robot the robot description (robot.js): the topic the latency probe asks about
    */
-  constructor(connection, state, root) {
+  constructor(connection, state, root, robot) {
     this.connection = connection;
     this.state = state;
+    this.probeTopic = robot.topics.odom.name;
     this.out = Object.fromEntries(
       [...root.querySelectorAll('[data-readout]')].map((el) => [el.dataset.readout, el]));
     this.latencyMs = null;
@@ -35,8 +37,8 @@ export class Readouts {
     this._set('v', fresh ? odom.v.toFixed(2) : '–');
     this._set('omega', fresh ? odom.omega.toFixed(2) : '–');
     this._set('time', fresh && odom.stampS !== null ? clock(odom.stampS) : '–');
-    this._set('odomRate', rateHz(this.state, '/odom', nowMs).toFixed(0));
-    this._set('scanRate', rateHz(this.state, '/scan', nowMs).toFixed(0));
+    this._set('odomRate', rateHz(this.state, 'odom', nowMs).toFixed(0));
+    this._set('scanRate', rateHz(this.state, 'scan', nowMs).toFixed(0));
     this._set('latency', this.latencyMs === null ? '–' : this.latencyMs.toFixed(0));
   }
 
@@ -50,7 +52,7 @@ export class Readouts {
     const start = performance.now();
     try {
       await this.connection.callService('/rosapi/topic_type', 'rosapi_msgs/srv/TopicType',
-        { topic: '/odom' }, LATENCY_PERIOD_MS);
+        { topic: this.probeTopic }, LATENCY_PERIOD_MS);
       this.latencyMs = performance.now() - start;
     } catch {
       this.latencyMs = null; // no rosapi on this bridge: nothing to show

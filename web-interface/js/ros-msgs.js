@@ -6,8 +6,13 @@
 /** visualization_msgs/Marker type and action codes. */
 export const MARKER = Object.freeze({ CYLINDER: 3, LINE_LIST: 5, ADD: 0, DELETE: 2, DELETEALL: 3 });
 
-/** rcl_interfaces/msg/ParameterType codes used here. */
-export const PARAM = Object.freeze({ NOT_SET: 0, BOOL: 1, INTEGER: 2, DOUBLE: 3, STRING: 4 });
+/** rcl_interfaces/msg/ParameterValue's field per ParameterType (robot.json has the codes). */
+const PARAMETER_FIELDS = Object.freeze({
+  BOOL: ['bool_value', (v) => typeof v === 'boolean'],
+  INTEGER: ['integer_value', Number.isInteger],
+  DOUBLE: ['double_value', (v) => typeof v === 'number'],
+  STRING: ['string_value', (v) => typeof v === 'string'],
+});
 
 /** builtin_interfaces/Time as seconds (a float), or null without one. */
 export function stampSeconds(stamp) {
@@ -166,21 +171,26 @@ export function markerBounds(markers) {
   return Number.isFinite(minX) ? { minX, minY, maxX, maxY } : null;
 }
 
-/** rcl_interfaces/msg/ParameterValue holding a JS value: number -> double, string, boolean. */
-export function parameterValue(value) {
-  if (typeof value === 'number') return { type: PARAM.DOUBLE, double_value: value };
-  if (typeof value === 'string') return { type: PARAM.STRING, string_value: value };
-  if (typeof value === 'boolean') return { type: PARAM.BOOL, bool_value: value };
-  throw new TypeError(`no ParameterValue for ${typeof value}`);
+/** The ParameterType name (BOOL, DOUBLE...) of `code` in `types` (robot.json's parameter_types). */
+function parameterKind(types, code) {
+  return Object.keys(types).find((kind) => types[kind] === code);
 }
 
-/** The JS value a ParameterValue holds (by its type code), or undefined when not set. */
-export function valueOfParameter(msg) {
-  switch (msg?.type) {
-    case PARAM.BOOL: return msg.bool_value;
-    case PARAM.INTEGER: return msg.integer_value;
-    case PARAM.DOUBLE: return msg.double_value;
-    case PARAM.STRING: return msg.string_value;
-    default: return undefined;
+/**
+ * rcl_interfaces/msg/ParameterValue of type `code` holding `value`; `types` maps ParameterType
+ * names to codes (robot.json's parameter_types). Throws a TypeError when `value` does not fit.
+ */
+export function parameterValue(types, code, value) {
+  const [field, fits] = PARAMETER_FIELDS[parameterKind(types, code)] ?? [];
+  if (!field) throw new TypeError(`no ParameterValue of type ${code}`);
+  if (!fits(value)) {
+    throw new TypeError(`${JSON.stringify(value)} is not a ${parameterKind(types, code)}`);
   }
+  return { type: code, [field]: value };
+}
+
+/** The JS value a ParameterValue holds (by its type code in `types`), or undefined when not set. */
+export function valueOfParameter(types, msg) {
+  const [field] = PARAMETER_FIELDS[parameterKind(types, msg?.type)] ?? [];
+  return field ? msg[field] : undefined;
 }

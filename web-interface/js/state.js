@@ -38,24 +38,24 @@ export function createState() {
     history: {
       t: [], vCmd: [], vMeas: [], wCmd: [], wMeas: [], headingDeg: [], setpointDeg: [],
     },
-    arrivals: new Map(), // topic -> arrival times (ms) within RATE_WINDOW_MS
+    arrivals: new Map(), // stream (robot.json's topic key: odom, scan...) -> arrival times (ms)
   };
 }
 
-/** Counts one message on `topic` for rateHz(). */
-export function noteArrival(state, topic, nowMs) {
-  let times = state.arrivals.get(topic);
+/** Counts one message of `stream` (odom, scan, ground_truth: robot.json's topic keys). */
+export function noteArrival(state, stream, nowMs) {
+  let times = state.arrivals.get(stream);
   if (!times) {
     times = [];
-    state.arrivals.set(topic, times);
+    state.arrivals.set(stream, times);
   }
   times.push(nowMs);
   while (times.length && times[0] < nowMs - RATE_WINDOW_MS) times.shift();
 }
 
-/** Messages per second on `topic` over the last RATE_WINDOW_MS. */
-export function rateHz(state, topic, nowMs) {
-  const times = state.arrivals.get(topic) ?? [];
+/** Messages per second of `stream` over the last RATE_WINDOW_MS. */
+export function rateHz(state, stream, nowMs) {
+  const times = state.arrivals.get(stream) ?? [];
   const recent = times.filter((t) => t >= nowMs - RATE_WINDOW_MS);
   return recent.length / (RATE_WINDOW_MS / 1000);
 }
@@ -73,7 +73,7 @@ export function onOdometry(state, msg, nowMs) {
   if (!pose) return;
   state.odom = pose;
   state.odomAtMs = nowMs;
-  noteArrival(state, '/odom', nowMs);
+  noteArrival(state, 'odom', nowMs);
   recordHistory(state, pose);
   if (displayPose(state, nowMs).frame === 'odom') extendTrail(state, pose, 'odom', nowMs);
 }
@@ -83,7 +83,7 @@ export function onGroundTruth(state, msg, nowMs) {
   if (!pose) return;
   state.truth = pose;
   state.truthAtMs = nowMs;
-  noteArrival(state, '/ground_truth', nowMs);
+  noteArrival(state, 'ground_truth', nowMs);
   extendTrail(state, pose, 'map', nowMs);
 }
 
@@ -94,7 +94,7 @@ export function onScan(state, msg, nowMs) {
     stampS: msg.header?.stamp ? msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 : null,
   };
   state.scanAtMs = nowMs;
-  noteArrival(state, '/scan', nowMs);
+  noteArrival(state, 'scan', nowMs);
 }
 
 export function onTfStatic(state, msg) {

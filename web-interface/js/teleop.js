@@ -1,4 +1,5 @@
-// Teleoperation: keys, on-screen buttons and a touch joystick drive /cmd_vel.
+// Teleoperation: keys, on-screen buttons and a touch joystick drive the robot's velocity
+// command topic (robot.json's topics.cmd_vel).
 //
 // Each input is a "source" holding a demand in [-1, 1] for linear and angular speed; the
 // command is their sum, clamped, times the speed sliders. While any source is active the
@@ -8,6 +9,7 @@
 
 import { onCommand } from './state.js';
 import { twist } from './ros-msgs.js';
+import { robotLimits } from './robot.js';
 
 /** The course's teleop rate. */
 export const PUBLISH_PERIOD_MS = 100;
@@ -20,8 +22,8 @@ export const KEY_DEMANDS = Object.freeze({
   ArrowRight: [0, -1], d: [0, -1],
 });
 
-/** Default speed limits when the robot does not say (config/pi4b_params.yaml). */
-export const DEFAULT_LIMITS = Object.freeze({ linear: 0.5, angular: 2.5 });
+/** The speeds teleop starts with, as a fraction of the robot's limits. */
+export const START_SPEED_FRACTION = 0.6;
 
 /** Inputs that keep the keys for themselves: typing, or arrows moving a slider. */
 export function keysBelongToElement(element) {
@@ -48,17 +50,23 @@ export function keyDemand(heldKeys) {
 }
 
 /**
- * The /cmd_vel side of teleoperation. Events: 'drive' when driving starts (the PID panel
- * stops then), 'command' with detail {linear, angular} on every publish.
+ * The velocity-command side of teleoperation. Events: 'drive' when driving starts (the PID
+ * panel stops then), 'command' with detail {linear, angular} on every publish.
+ * @param {object} robot the robot description (robot.js): its cmd_vel topic and limits
  */
 export class Teleop extends EventTarget {
-  constructor(connection, state) {
+  constructor(connection, state, robot) {
     super();
     this.connection = connection;
     this.state = state;
-    this.cmdVel = connection.publisher('/cmd_vel', 'geometry_msgs/msg/Twist');
+    const { name, type } = robot.topics.cmd_vel;
+    this.cmdVel = connection.publisher(name, type);
     this.sources = new Map(); // name -> [linear, angular] demand
-    this.speed = { linear: 0.3, angular: 1.5 }; // the sliders (m/s, rad/s)
+    const limits = robotLimits(robot);
+    this.speed = { // what full demand means (m/s, rad/s): the sliders set it
+      linear: START_SPEED_FRACTION * limits.linear,
+      angular: START_SPEED_FRACTION * limits.angular,
+    };
     this.timer = null;
     connection.addEventListener('beforeclose', () => this.stop());
     connection.addEventListener('disconnected', () => this._clear());
@@ -206,26 +214,30 @@ export function bindJoystick(teleop, zone, nipplejs) {
   return manager;
 }
 
-/** Speed sliders (range inputs) set teleop.speed; their bounds follow the robot's limits. */
-export function bindSpeedSliders(teleop, { linear, angular, linearOut, angularOut }) {
+/**
+ * Speed sliders (range inputs) set teleop.speed; they start at teleop's speed, bounded by
+ * `limits` {linear (m/s), angular (rad/s)}, and setLimits() moves the bounds.
+ */
+export function bindSpeedSliders(teleop, { linear, angular, linearOut, angularOut }, limits) {
   const show = () => {
     teleop.speed = { linear: Number(linear.value), angular: Number(angular.value) };
     linearOut.value = `${teleop.speed.linear.toFixed(2)} m/s`;
     angularOut.value = `${teleop.speed.angular.toFixed(1)} rad/s`;
   };
+  const setLimits = (bounds) => {
+    linear.max = String(bounds.linear);
+    angular.max = String(bounds.angular);
+    linear.value = String(Math.min(Number(linear.value), bounds.linear));
+    angular.value = String(Math.min(Number(angular.value), bounds.angular));
+    show();
+  };
   linear.addEventListener('input', show);
   angular.addEventListener('input', show);
-  show();
-  return {
-    /** Bounds the sliders by the robot's limits (m/s, rad/s), keeping the values inside. */
-    setLimits(limits) {
-      linear.max = String(limits.linear);
-      angular.max = String(limits.angular);
-      linear.value = String(Math.min(Number(linear.value), limits.linear));
-      angular.value = String(Math.min(Number(angular.value), limits.angular));
-      show();
-    },
-  };
+  linear.value = String(teleop.speed.linear); // the page sets no max: nothing clamps these
+  angular.value = String(teleop.speed.angular);
+  setLimits(limits);
+  /** Bounds the sliders by the robot's limits (m/s, rad/s), keeping the values inside. */
+  return { setLimits };
 }
 
 function clampUnit(value) {

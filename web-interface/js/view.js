@@ -9,11 +9,7 @@
 import { displayPose, TRAIL_S } from './state.js';
 import { composePose } from './ros-msgs.js';
 
-/** The course robot's collision circle (config/pi4b_params.yaml robot.footprint_radius_m). */
-export const FOOTPRINT_RADIUS_M = 0.11;
-const WHEEL_TRACK_M = 0.16; // robot.wheelbase_m: distance between the wheels
-const WHEEL_DIAMETER_M = 0.066;
-const WHEEL_WIDTH_M = 0.025;
+const WHEEL_WIDTH_M = 0.025; // drawn only: the model has no wheel width
 
 export const COLORS = Object.freeze({
   background: '#f8fafc',
@@ -45,12 +41,18 @@ export class View {
   /**
    * @param {HTMLCanvasElement} canvas
    * @param {object} state from state.js
+   * @param {object} robot the robot description (robot.js): footprint, wheelbase, wheels
    * @param {{onFollowChange?: (follow: boolean) => void}} [options]
    */
-  constructor(canvas, state, { onFollowChange = () => {} } = {}) {
+  constructor(canvas, state, robot, { onFollowChange = () => {} } = {}) {
     this.canvas = canvas;
     this.ctx = canvas.getContext('2d');
     this.state = state;
+    this.body = { // the robot's drawing (m)
+      radius: robot.robot.footprint_radius_m,
+      track: robot.robot.wheelbase_m,
+      wheelDiameter: 2 * robot.robot.wheel_radius_m,
+    };
     this.onFollowChange = onFollowChange;
     this.camera = { x: 0, y: 0, scale: 80 }; // world point at the centre; px per m
     this.follow = false;
@@ -271,11 +273,12 @@ export class View {
     ctx.save();
     ctx.translate(cx, cy);
     ctx.rotate(-pose.theta); // canvas angles turn clockwise: the y-flip reverses them
-    const r = Math.max(FOOTPRINT_RADIUS_M * scale, 4);
+    const { radius, track, wheelDiameter } = this.body;
+    const r = Math.max(radius * scale, 4);
     ctx.fillStyle = COLORS.wheel;
     for (const side of [-1, 1]) {
-      ctx.fillRect((-WHEEL_DIAMETER_M / 2) * scale, (side * WHEEL_TRACK_M) / 2 * scale
-        - (WHEEL_WIDTH_M / 2) * scale, WHEEL_DIAMETER_M * scale, WHEEL_WIDTH_M * scale);
+      ctx.fillRect((-wheelDiameter / 2) * scale, (side * track) / 2 * scale
+        - (WHEEL_WIDTH_M / 2) * scale, wheelDiameter * scale, WHEEL_WIDTH_M * scale);
     }
     ctx.beginPath();
     ctx.arc(0, 0, r, 0, 2 * Math.PI);
