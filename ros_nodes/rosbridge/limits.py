@@ -36,7 +36,6 @@ class ClientLimits:
         max_frame_bytes: largest incoming WebSocket message; larger ones close it (1009).
         max_queued_bytes: all frames waiting to be sent to one client (topic frames and
             replies); beyond it the client is closed (1008): it is not reading.
-        max_queue_length: largest ``queue_length`` a subscription may ask for.
         max_ids_per_topic: subscribe ids one client may hold on one topic.
         max_subscriptions: topics one client may subscribe to at once.
         max_advertised: topics one client may advertise at once.
@@ -59,7 +58,6 @@ class ClientLimits:
     max_rate: float = DEFAULT_MAX_RATE
     max_frame_bytes: int = 1 << 20
     max_queued_bytes: int = 4 << 20
-    max_queue_length: int = 100
     max_ids_per_topic: int = 16
     max_subscriptions: int = 64
     max_advertised: int = 32

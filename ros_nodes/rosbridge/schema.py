@@ -27,7 +27,8 @@ MAX_THROTTLE_MS = 3_600_000
 """Largest ``throttle_rate`` (one hour, in ms)."""
 
 MAX_QUEUE_LENGTH = 100
-"""Largest ``queue_length``; see ``limits.ClientLimits.max_queue_length``."""
+"""Largest ``queue_length``: the newest 100 of a topic may wait for a slow client (5 s of
+/odom), within its byte budget (``limits.ClientLimits.max_queued_bytes``)."""
 
 MAX_TYPE_CHARS = 256
 """Longest type name (``pkg/msg/Type``)."""

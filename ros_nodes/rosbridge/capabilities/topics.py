@@ -229,8 +229,8 @@ class Topics:
         if message.get("type"):
             self._known_type(topic, message["type"])
         limits = session.limits
-        throttle_ms = float(message.get("throttle_rate", 0))
-        queue_length = min(int(message.get("queue_length", 0)), limits.max_queue_length)
+        throttle_ms = float(message.get("throttle_rate", 0))  # ranges: schema.OP_FIELDS
+        queue_length = int(message.get("queue_length", 0))
         subscription = session.subscriptions.get(topic)
         sub_id = message.get("id")
         if subscription is not None and sub_id not in subscription.throttle_ms \
