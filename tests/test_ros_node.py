@@ -250,7 +250,7 @@ def test_invalid_parameters_are_refused_with_the_reason(
 
 @pytest.mark.parametrize(("override", "reason"), [
     ("world:=no_such_world", "no_such_world"),
-    ("mass_kg:=-2.0", "mass_kg: must be between 0.01 and 1000"),
+    ("mass_kg:=-2.0", "Parameter mass_kg out of range Min: 0.01, Max: 1000.0"),
     ("scan_sigma_m:=-1.0", "scan_sigma_m"),
 ])
 def test_invalid_start_parameters_exit_with_the_reason(domain: int, override: str,
