@@ -64,10 +64,14 @@ class VirtualRobot:
         self.sim.command(linear, angular)
         self._ticks_since_command = 0
 
-    def step(self) -> list[Publication]:
+    def step(self, scan: bool = True) -> list[Publication]:
         """Advance one tick and return the messages due at it (/scan on every second tick).
 
         With ``cmd_vel_timeout_s`` > 0, a command older than that is replaced by a stop first.
+
+        Args:
+            scan: whether to cast the LiDAR on ticks /scan is due (False: nobody listens, so
+                the rays are not cast and no /scan is returned).
         """
         timeout_s = self.parameters.cmd_vel_timeout_s
         expired = timeout_s > 0.0 and \
@@ -89,7 +93,7 @@ class VirtualRobot:
                                                odom.theta)])),
             (GROUND_TRUTH, odometry_msg(state.ground_truth, now, MAP_FRAME)),
         ]
-        if state.tick % SCAN.every_ticks == 0:
+        if scan and state.tick % SCAN.every_ticks == 0:
             out.append((SCAN, laser_scan_msg(self.sim.scan(), now)))
         for listener in self.listeners:
             listener(out)

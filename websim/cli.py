@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import secrets
 import sys
 from collections.abc import Sequence
 
@@ -10,8 +11,9 @@ from physics import MODES, ConfigError, Simulation, load_params, load_world
 from physics.params import SHIPPED_PARAMS_FILE
 from physics.world import WORLDS_DIR
 from ros_nodes.robot_description import robot_json
+from ros_nodes.rosbridge.classroom import Student
 from ros_nodes.virtual_robot_core import VirtualRobot
-from websim import compare_command
+from websim import compare_command, sites
 from websim import serve as serve_command
 
 DEFAULT_WORLD = str(WORLDS_DIR / "empty.yaml")
@@ -100,7 +102,22 @@ def _run_robot_json(args: argparse.Namespace) -> int:
 
 
 def _run_serve(args: argparse.Namespace) -> int:
-    return serve_command.run(args, VirtualRobot(make_simulation(args)))
+    token = args.admin_token or secrets.token_urlsafe(16)
+    limits, origins = serve_command.limits_from(args), serve_command.origins_from(args)
+    if args.class_spec is None:
+        site = sites.single_robot(VirtualRobot(make_simulation(args)), token, limits, origins)
+        return serve_command.run(args, site, token)
+    if args.ros:
+        raise ConfigError("--class with --ros is not supported yet: run the class without "
+                          "--ros, or one robot with --ros")
+
+    def make_robot(student: Student) -> VirtualRobot:
+        world = args.world if student.world is None else student.world
+        return VirtualRobot(make_simulation(argparse.Namespace(**{**vars(args),
+                                                                 "world": world})))
+
+    return serve_command.run(args, sites.classroom_site(args, make_robot, token, limits,
+                                                        origins), token)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -37,7 +37,8 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from fnmatch import fnmatch
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
+from urllib.parse import urlsplit
 
 from aiohttp import web
 from aiohttp.abc import AbstractAccessLogger
@@ -85,6 +86,12 @@ size; once per file and change."""
 SEGMENT = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]*")
 """One path segment of a published file: no dotfile, ``.``, ``..``, empty segment (a
 directory's trailing slash), backslash, NUL or other oddity."""
+
+ROBOTS_PREFIX = "/robots/"
+"""A class's robot pages: ``/robots/NAME/`` is the page, ``/robots/NAME/admin`` its admin."""
+
+LIVE_DOCUMENTS = ("/robot.json", "/config.json")
+"""Documents the server may fill itself (``LiveDocuments``) instead of serving the file."""
 
 CACHE_CONTROL = "no-cache"
 """Every answer is revalidated: a classroom reloads after every update (ETags make it a 304)."""
@@ -330,10 +337,10 @@ class HttpServer:
     """The web interface's HTTP server; ``start_http`` starts one, ``close()`` stops it."""
 
     def __init__(self, web_dir: Path, health: Callable[[], dict[str, Any]],
-                 robot_json: Callable[[], str], cap: int) -> None:
+                 live: LiveDocuments, cap: int) -> None:
         self._web_dir = os.path.realpath(web_dir)
         self._health = health
-        self._robot_json = robot_json
+        self._live = live
         self._assets: dict[str, _Asset] = {}  # by real path in the web folder
         self.connections = ConnectionTable(cap)
         protocol_log = _ClientFaultLogger("websim.http.protocol")
@@ -383,12 +390,24 @@ class HttpServer:
         if request.method not in ("GET", "HEAD"):
             return web.Response(status=405, text="405: Method Not Allowed",
                                 headers={"Allow": "GET, HEAD"})
-        if request.path == "/healthz":
+        path = request.path
+        if path == "/healthz":
             return web.Response(text=json.dumps(self._health()), content_type="application/json",
                                 headers={"Cache-Control": "no-store"})
-        if request.path == "/robot.json":
-            return web.Response(text=self._robot_json(), content_type="application/json")
-        asset = self._asset(request.path)
+        robot: str | None = None
+        if path.startswith(ROBOTS_PREFIX):  # a class's robot: its page, with its documents
+            robot, slash, rest = path[len(ROBOTS_PREFIX):].partition("/")
+            if not self._live.has_robot(robot):
+                return web.Response(status=404, text=f"404: no robot named '{robot[:40]}' here")
+            if not slash:  # the page's relative URLs need the trailing slash
+                return web.Response(status=308, headers={"Location": f"{ROBOTS_PREFIX}{robot}/"})
+            path = f"/{rest}"
+        if path in LIVE_DOCUMENTS:
+            hostname = urlsplit(f"//{request.host}").hostname or "localhost"
+            text = self._live.document(robot, path[1:], hostname)
+            if text is not None:
+                return web.Response(text=text, content_type="application/json")
+        asset = self._asset(path)
         if asset is None:
             return web.Response(status=404, text="404: Not Found")
         gzipped = asset.gzipped is not None and "gzip" in request.headers.get(
@@ -435,9 +454,23 @@ def _etags(header: str) -> list[str]:
     return [tag.strip().removeprefix("W/") for tag in header.split(",")]
 
 
+class LiveDocuments(Protocol):
+    """The documents the server fills itself, and which robots (``/robots/NAME/``) exist."""
+
+    def has_robot(self, name: str) -> bool:
+        """Whether ``/robots/NAME/`` is a robot's page (False on a single-robot server)."""
+
+    def document(self, robot: str | None, name: str, hostname: str) -> str | None:
+        """The text of ``name`` (``robot.json``, ``config.json``) for ``robot``.
+
+        ``robot`` None is the server's own; ``hostname`` is what the browser asked for.
+        None: serve the file instead.
+        """
+
+
 async def start_http(host: str, port: int, directory: Path,
                      health: Callable[[], dict[str, Any]],
-                     robot_json: Callable[[], str]) -> HttpServer:
+                     live: LiveDocuments) -> HttpServer:
     """Serve the web interface on ``host:port`` on the running event loop.
 
     Raises the process's soft open-file limit to the hard one first, and sizes the
@@ -448,13 +481,14 @@ async def start_http(host: str, port: int, directory: Path,
         port: TCP port.
         directory: the web folder (``web-interface/``).
         health: the ``/healthz`` document, called on the loop per request.
-        robot_json: the ``/robot.json`` text (the live robot description), likewise.
+        live: the live ``robot.json`` and ``config.json`` and the robots of a class,
+            likewise.
 
     Raises:
         OSError: the port cannot be bound (in use, say).
     """
     cap = connection_cap(raise_open_file_limit())
-    server = HttpServer(directory, health, robot_json, cap)
+    server = HttpServer(directory, health, live, cap)
     log.debug("HTTP connections capped at %d", cap)
     try:
         await server.listen(host, port)

@@ -12,7 +12,6 @@ import errno
 import logging
 import math
 import os
-import secrets
 import signal
 import sys
 from collections.abc import Callable
@@ -20,11 +19,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from physics.params import PROJECT_DIR
-from ros_nodes.robot_description import robot_json
+from ros_nodes.rosbridge.classroom import DEFAULT_IDLE_PAUSE_S, DEFAULT_MAX_ROBOTS
 from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy
 from ros_nodes.rosbridge.server import SimServer, start_websocket
 from ros_nodes.virtual_robot_core import VirtualRobot
 from websim.http_server import start_http
+from websim.sites import Site
 
 if TYPE_CHECKING:  # rclpy is imported only with --ros
     from ros_nodes.ros_graph import RosRuntime
@@ -70,6 +70,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "Default: the pages this server serves, pages from this machine "
                              "(localhost, any port) and clients without an Origin (roslibpy, "
                              "Node)")
+    parser.add_argument("--class", dest="class_spec", metavar="ROSTER|N", default=None,
+                        help="host a class: one independent robot per line of the roster "
+                             "file (name[,world[,token]]), or N robots robot01..robotNN; robot "
+                             "NAME is at ws://HOST:9090/robots/NAME and "
+                             "http://HOST:8080/robots/NAME/")
+    parser.add_argument("--open-class", action="store_true",
+                        help="with --class: a new name enrols on its first connection")
+    parser.add_argument("--max-robots", type=_positive(int), default=DEFAULT_MAX_ROBOTS,
+                        metavar="N", help="most robots an open class holds (default "
+                                          f"{DEFAULT_MAX_ROBOTS})")
+    parser.add_argument("--idle-pause", type=_positive(float), default=DEFAULT_IDLE_PAUSE_S,
+                        metavar="S", help="with --class: a robot nobody has been connected to "
+                                          "for S seconds stops ticking, keeping its state "
+                                          f"(default {DEFAULT_IDLE_PAUSE_S:g})")
+    parser.add_argument("--links", default=None, metavar="FILE",
+                        help="with --class: write a CSV of every robot's page, admin page "
+                             "with its token, WebSocket URL and token, to hand out")
     parser.add_argument("--ros", action="store_true",
                         help="also run the virtual_robot node on the ROS 2 graph and relay "
                              "rosbridge topics to it (needs rclpy: pip install '.[ros]')")
@@ -96,21 +113,27 @@ def _url_host(host: str) -> str:
     return "localhost" if host in ("0.0.0.0", "::", "127.0.0.1", "") else host
 
 
-async def serve_forever(args: argparse.Namespace, robot: VirtualRobot) -> int:
+def limits_from(args: argparse.Namespace) -> ClientLimits:
+    """The client limits the options ask for."""
+    return ClientLimits(max_rate=args.max_rate, max_frame_bytes=args.max_frame_bytes,
+                        max_queued_bytes=args.max_queued_bytes, max_clients=args.max_clients)
+
+
+def origins_from(args: argparse.Namespace) -> OriginPolicy:
+    """The origin policy the options ask for."""
+    return OriginPolicy.default(args.host, args.http_port, args.allow_origin)
+
+
+async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int:
     """Run until SIGINT or SIGTERM; returns the exit code."""
-    token = args.admin_token or secrets.token_urlsafe(16)
-    origins = OriginPolicy.default(args.host, args.http_port, args.allow_origin)
-    limits = ClientLimits(max_rate=args.max_rate, max_frame_bytes=args.max_frame_bytes,
-                          max_queued_bytes=args.max_queued_bytes, max_clients=args.max_clients)
-    server = SimServer(robot, token, limits=limits, origins=origins)
+    server = site.front
+    robot = site.robot
     try:
         websocket = await start_websocket(server, args.host, args.ws_port)
     except OSError as error:
         return _port_error("WebSocket", args.host, args.ws_port, error)
     try:
-        http = await start_http(
-            args.host, args.http_port, args.web_dir, server.health,
-            lambda: robot_json(robot.sim.params, robot.sim.lidar.params))
+        http = await start_http(args.host, args.http_port, args.web_dir, server.health, site)
     except OSError as error:
         websocket.close()
         return _port_error("HTTP", args.host, args.http_port, error)
@@ -118,7 +141,7 @@ async def serve_forever(args: argparse.Namespace, robot: VirtualRobot) -> int:
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     ros = None
-    if args.ros:
+    if args.ros and robot is not None and isinstance(server, SimServer):
         try:
             ros = _start_ros(robot, server, loop)
         except RuntimeError as error:
@@ -133,10 +156,19 @@ async def serve_forever(args: argparse.Namespace, robot: VirtualRobot) -> int:
         tasks.append(asyncio.create_task(_poll_graph(ros)))
 
     host = _url_host(args.host)
-    print(f"websim: world '{robot.sim.world.name}', {robot.sim.mode} mode", flush=True)
-    print(f"  page:      http://{host}:{args.http_port}/", flush=True)
-    print(f"  websocket: ws://{host}:{args.ws_port}/", flush=True)
-    print(f"  admin:     http://{host}:{args.http_port}/admin?token={token}", flush=True)
+    if robot is not None:
+        print(f"websim: world '{robot.sim.world.name}', {robot.sim.mode} mode", flush=True)
+        print(f"  page:      http://{host}:{args.http_port}/", flush=True)
+        print(f"  websocket: ws://{host}:{args.ws_port}/", flush=True)
+        print(f"  admin:     http://{host}:{args.http_port}/admin?token={token}", flush=True)
+    else:
+        print(f"websim: a class, {args.mode} mode", flush=True)
+        print(f"  pages:     http://{host}:{args.http_port}/robots/NAME/", flush=True)
+        print(f"  websocket: ws://{host}:{args.ws_port}/robots/NAME", flush=True)
+        print(f"  admin:     http://{host}:{args.http_port}/robots/NAME/admin?token={token} "
+              "(the instructor's token: every robot)", flush=True)
+    for line in site.banner:
+        print(f"  {line}", flush=True)
     if ros is not None:
         print(f"  ROS 2:     node /virtual_robot and relay /rosbridge_websocket on "
               f"ROS_DOMAIN_ID {os.environ.get('ROS_DOMAIN_ID', '0')}", flush=True)
@@ -193,8 +225,8 @@ def _port_error(what: str, host: str, port: int, error: OSError) -> int:
     return 1
 
 
-def run(args: argparse.Namespace, robot: VirtualRobot) -> int:
-    """Entry point of ``websim serve`` after the simulation was built."""
+def run(args: argparse.Namespace, site: Site, token: str) -> int:
+    """Entry point of ``websim serve`` after the robots were built."""
     logging.basicConfig(level=args.log_level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    return asyncio.run(serve_forever(args, robot))
+    return asyncio.run(serve_forever(args, site, token))

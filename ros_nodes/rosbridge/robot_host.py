@@ -17,6 +17,7 @@ import logging
 import math
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -47,23 +48,24 @@ instead of replaying every missed tick at once."""
 
 @dataclass
 class TickStats:
-    """What the tick loop has done, for /healthz and benchmarks.
+    """What one robot's ticks have done, for /healthz and benchmarks.
 
     Attributes:
-        ticks: ticks run since start.
-        started_s: when the schedule started (event-loop monotonic s), None before.
+        ticks: ticks run since start (paused ones not counted).
         lateness_s: how late each recent tick started after its deadline (s).
-        resyncs: times the schedule was restarted after falling far behind.
         scans_shed: /scan messages not published because their tick was late.
+        scans_cast: LiDAR scans computed (only on ticks where a client subscribes to /scan,
+            or a ROS graph is attached).
         resets: times the robot was reset because a fault left it in a non-finite state.
+        paused: whether the robot is paused now (nobody connected for the idle time).
     """
 
     ticks: int = 0
-    started_s: float | None = None
     lateness_s: deque[float] = field(default_factory=lambda: deque(maxlen=1200))
-    resyncs: int = 0
     scans_shed: int = 0
+    scans_cast: int = 0
     resets: int = 0
+    paused: bool = False
 
     def jitter_p99_ms(self) -> float:
         """99th percentile of recent tick lateness (ms)."""
@@ -73,30 +75,34 @@ class TickStats:
         return 1000.0 * samples[min(len(samples) - 1, int(0.99 * len(samples)))]
 
 
-class RobotHost:
-    """A robot, its bridge and its tick loop.
+class Schedule:
+    """The tick schedule of one event loop, shared by every robot on it.
+
+    Deadlines advance by exactly one period on the monotonic clock (no drift); a loop that
+    falls ``RESYNC_AFTER_S`` behind restarts its schedule instead of replaying the ticks.
 
     Args:
-        robot: the virtual robot to run.
         period_s: tick period (s).
+
+    Attributes:
+        started_s: when the schedule started (event-loop monotonic s), None before.
+        resyncs: times the schedule was restarted after falling far behind.
     """
 
-    def __init__(self, robot: VirtualRobot, period_s: float = TICK_PERIOD_S) -> None:
-        self.robot = robot
-        self.faults = Faults()
-        self.bridge = Bridge(faults=self.faults)
-        self.endpoint = RobotEndpoint(self.bridge, robot)
-        self.stats = TickStats()
-        self._period_s = period_s
+    def __init__(self, period_s: float = TICK_PERIOD_S) -> None:
+        self.period_s = period_s
+        self.started_s: float | None = None
+        self.resyncs = 0
+        self._ticks = 0
         self._next_deadline_s: float | None = None
 
-    async def run_ticks(self) -> None:
-        """Tick forever at ``period_s``, deadlines fixed to the monotonic clock."""
+    async def run(self, tick: Callable[[float], None]) -> None:
+        """Call ``tick(lateness_s)`` every period, forever."""
         loop = asyncio.get_running_loop()
         deadline = loop.time()
-        self.stats.started_s = deadline
+        self.started_s = deadline
         while True:
-            deadline += self._period_s
+            deadline += self.period_s
             self._next_deadline_s = deadline
             delay = deadline - loop.time()
             if delay > 0:
@@ -104,14 +110,19 @@ class RobotHost:
             now = loop.time()
             if now - deadline > RESYNC_AFTER_S:
                 log.warning("tick loop %.1f s behind; restarting its schedule", now - deadline)
-                self.stats.resyncs += 1
-                self.stats.started_s = now - self.stats.ticks * self._period_s
+                self.resyncs += 1
+                self.started_s = now - self._ticks * self.period_s
                 deadline = now
-            lateness_s = max(0.0, now - deadline)
-            self.stats.lateness_s.append(lateness_s)
-            self.tick(lateness_s)
+            self._ticks += 1
+            tick(max(0.0, now - deadline))
 
-    async def before_tick_room(self, cost_s: float) -> None:
+    def ticks_due(self) -> int:
+        """Ticks the schedule should have run by now."""
+        if self.started_s is None:
+            return 0
+        return int((time.monotonic() - self.started_s) / self.period_s)
+
+    async def room(self, cost_s: float) -> None:
         """Wait until ``cost_s`` of work can run before the next tick is due.
 
         Large client frames are handled between ticks, not across one: work that would make
@@ -124,11 +135,61 @@ class RobotHost:
                 return
             await asyncio.sleep(max(0.0, deadline - loop.time()) + AFTER_TICK_S)
 
+
+class RobotHost:
+    """A robot, its bridge and its ticks.
+
+    Args:
+        robot: the virtual robot to run.
+        schedule: the tick schedule it follows (default: one of its own).
+        idle_pause_s: stop ticking (keeping the state) once nobody has been connected for
+            this long; the next connection resumes it. None: never pause.
+        clock: monotonic clock (s), for the idle time.
+    """
+
+    def __init__(self, robot: VirtualRobot, schedule: Schedule | None = None,
+                 idle_pause_s: float | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.robot = robot
+        self.faults = Faults()
+        self.bridge = Bridge(faults=self.faults)
+        self.endpoint = RobotEndpoint(self.bridge, robot)
+        self.stats = TickStats()
+        self.schedule = schedule or Schedule()
+        self._idle_pause_s = idle_pause_s
+        self._clock = clock
+        self._last_client_s = clock()
+
+    async def run_ticks(self) -> None:
+        """Tick this robot alone, forever."""
+        await self.schedule.run(self.tick)
+
+    async def before_tick_room(self, cost_s: float) -> None:
+        """Wait until ``cost_s`` of work can run before the next tick (``Schedule.room``)."""
+        await self.schedule.room(cost_s)
+
+    def _idle(self) -> bool:
+        """Whether the robot should pause: nobody connected for ``idle_pause_s``."""
+        if self.bridge.sessions:
+            self._last_client_s = self._clock()
+            return False
+        return self._idle_pause_s is not None and \
+            self._clock() - self._last_client_s >= self._idle_pause_s
+
     def tick(self, lateness_s: float = 0.0) -> None:
-        """One tick: step the robot, deliver its messages, expire service calls; never raises."""
+        """One tick: step the robot, deliver its messages, expire service calls; never raises.
+
+        A robot nobody has been connected to for ``idle_pause_s`` is not stepped (paused).
+        """
+        self.stats.paused = self._idle()
+        if self.stats.paused:
+            return
         self.stats.ticks += 1
+        self.stats.lateness_s.append(lateness_s)
         publications = self._step()
         for spec, msg in publications:
+            if spec is SCAN:
+                self.stats.scans_cast += 1
             if spec is SCAN and lateness_s > SHED_SCANS_AFTER_S:
                 self.stats.scans_shed += 1
                 continue
@@ -142,8 +203,9 @@ class RobotHost:
             self.faults.record("expiring service calls", error)
 
     def _step(self) -> list[Publication]:
+        wants_scan = self.bridge.topics.has_subscribers(SCAN.name) or self.bridge.graph.attached
         try:
-            publications = self.robot.step()
+            publications = self.robot.step(scan=wants_scan)
         except Exception as error:  # the robot's boundary: record, recover, go on
             self.faults.record("stepping the robot", error)
             self._recover("its step failed")
@@ -167,16 +229,16 @@ class RobotHost:
 
     def health(self) -> dict[str, Any]:
         """This robot's part of /healthz."""
-        started = self.stats.started_s
-        due = 0 if started is None else int((time.monotonic() - started) / self._period_s)
         sessions = self.bridge.sessions
         report: dict[str, Any] = {
             "status": "degraded" if self.faults.degraded else "ok",
             "ticks": self.stats.ticks,
-            "ticks_due": due,
+            "ticks_due": self.schedule.ticks_due(),
+            "paused": self.stats.paused,
             "tick_jitter_p99_ms": round(self.stats.jitter_p99_ms(), 3),
-            "tick_resyncs": self.stats.resyncs,
+            "tick_resyncs": self.schedule.resyncs,
             "scans_shed": self.stats.scans_shed,
+            "scans_cast": self.stats.scans_cast,
             "robot_resets": self.stats.resets,
             "clients": len(sessions),
             "queued_frames": sum(len(session.outbox) for session in sessions),

@@ -17,6 +17,7 @@ buffer is capped.
 
 from __future__ import annotations
 
+import abc
 import asyncio
 import hmac
 import http
@@ -36,7 +37,7 @@ from physics import TICK_PERIOD_S
 from ros_nodes.rosbridge.bridge import Bridge
 from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy, RateLimit, TokenBucket
 from ros_nodes.rosbridge.outbox import Outbox
-from ros_nodes.rosbridge.robot_host import RobotHost, TickStats
+from ros_nodes.rosbridge.robot_host import RobotHost, Schedule, TickStats
 from ros_nodes.rosbridge.session import Session
 from ros_nodes.virtual_robot_core import VirtualRobot
 
@@ -73,6 +74,9 @@ FLOOD_CLOSE_TIMEOUT_S = 0.5
 """How long a client closed for flooding gets for the close handshake: its frames are no
 longer read, so its close frame would only arrive behind them; its buffers go at once."""
 
+ROBOTS_PREFIX = "/robots/"
+"""Where a class's robots are: ``ws://HOST:9090/robots/NAME``."""
+
 SEND_BUFFER_BYTES = 128 << 10
 """Kernel send buffer per client (Linux doubles it). Autotuned, it grows to about 4 MB, which a
 client that stops reading fills at the stream's ~100 kB/s for most of a minute before its
@@ -80,49 +84,43 @@ outbox (bounded, newest first) takes over: 100 such clients would pin 400 MB of 
 128 KiB is still over a second of every topic, and a LAN's bandwidth-delay product."""
 
 
-class SimServer:
-    """The WebSocket front of one robot: handshakes, rights, and one object per client.
+class WebSocketFront(abc.ABC):
+    """What every server does at a WebSocket handshake: health, origins, rights, routing.
+
+    Subclasses say which robot a path names (``route``) and who is admin there.
 
     Args:
-        robot: the virtual robot to run.
-        admin_token: the secret that grants admin rights (``?token=`` in the URL).
-        period_s: tick period (s).
+        admin_token: the secret that grants admin rights everywhere (``?token=``).
         limits: the bounds every client lives within.
         origins: which web pages may connect; None: any (tests and benchmarks).
     """
 
-    def __init__(self, robot: VirtualRobot, admin_token: str,
-                 period_s: float = TICK_PERIOD_S, limits: ClientLimits | None = None,
+    def __init__(self, admin_token: str, limits: ClientLimits | None = None,
                  origins: OriginPolicy | None = None) -> None:
-        self.host = RobotHost(robot, period_s)
         self.limits = limits or ClientLimits()
         self._admin_token = admin_token
         self._origins = origins
         self.started_monotonic_s = time.monotonic()
 
-    @property
-    def robot(self) -> VirtualRobot:
-        """The robot served."""
-        return self.host.robot
+    @abc.abstractmethod
+    def route(self, path: str) -> tuple[RobotHost, str | None] | str:
+        """The robot a WebSocket path names, with its name, or why there is none.
 
-    @property
-    def bridge(self) -> Bridge:
-        """The robot's bridge."""
-        return self.host.bridge
+        Returns:
+            (host, name), name None for a server's single robot; or the reason to refuse.
+        """
 
-    @property
-    def stats(self) -> TickStats:
-        """The robot's tick statistics."""
-        return self.host.stats
+    def robot_admin(self, name: str | None, token: str | None) -> bool:
+        """Whether ``token`` grants admin rights on robot ``name`` besides the admin token."""
+        return False
 
-    async def run_ticks(self) -> None:
-        """Run the robot's tick loop forever."""
-        await self.host.run_ticks()
-
+    @abc.abstractmethod
     def health(self) -> dict[str, Any]:
-        """A small status report: uptime, the robot's ticks, jitter, clients and faults."""
-        return {**self.host.health(),
-                "uptime_s": round(time.monotonic() - self.started_monotonic_s, 3)}
+        """The /healthz document."""
+
+    @abc.abstractmethod
+    async def run_ticks(self) -> None:
+        """Tick the robots forever."""
 
     def is_admin_token(self, token: str | None) -> bool:
         """Constant-time comparison of a presented token with the admin token."""
@@ -132,10 +130,20 @@ class SimServer:
 
     def process_request(self, connection: ServerConnection,
                         request: Request) -> Response | None:
-        """Answer ``GET /healthz`` over plain HTTP; refuse pages from other origins (403)."""
-        if urlsplit(request.path).path == "/healthz":
+        """Answer ``GET /healthz``; refuse unknown robots, full robots and other origins.
+
+        Unknown robots get 404, a robot at ``max_clients`` 503, another site's page 403.
+        """
+        path = urlsplit(request.path).path
+        if path == "/healthz":
             return json_response(self.health())
-        if len(self.bridge.sessions) >= self.limits.max_clients:
+        routed = self.route(path)
+        if isinstance(routed, str):
+            log.warning("refused a WebSocket from %s for %s: %s", _peer(connection),
+                        path[:80], routed)
+            return connection.respond(http.HTTPStatus.NOT_FOUND, f"{routed}\n")
+        host, _ = routed
+        if len(host.bridge.sessions) >= self.limits.max_clients:
             log.warning("refused a WebSocket from %s: %d clients already (the limit)",
                         _peer(connection), self.limits.max_clients)
             return connection.respond(http.HTTPStatus.SERVICE_UNAVAILABLE,
@@ -154,12 +162,66 @@ class SimServer:
     async def handle_connection(self, connection: ServerConnection) -> None:
         """Serve one client until it goes."""
         peer = _peer(connection)
-        query = parse_qs(urlsplit(connection.request.path if connection.request else "").query)
-        token = query.get("token", [None])[0]
-        is_admin = self.is_admin_token(token)
+        target = urlsplit(connection.request.path if connection.request else "")
+        routed = self.route(target.path)
+        if isinstance(routed, str):  # pragma: no cover - refused at the handshake
+            return
+        host, name = routed
+        token = parse_qs(target.query).get("token", [None])[0]
+        is_admin = self.is_admin_token(token) or self.robot_admin(name, token)
         if token and not is_admin:
             log.warning("client %s presented a wrong admin token", peer)
-        await ClientConnection(self.host, connection, peer, is_admin, self.limits).run()
+        await ClientConnection(host, connection, peer, is_admin, self.limits).run()
+
+    def _uptime_s(self) -> float:
+        return round(time.monotonic() - self.started_monotonic_s, 3)
+
+
+class SimServer(WebSocketFront):
+    """The WebSocket front of one robot, at every path but ``/robots/...``.
+
+    Args:
+        robot: the virtual robot to run.
+        admin_token: the secret that grants admin rights (``?token=`` in the URL).
+        period_s: tick period (s).
+        limits: the bounds every client lives within.
+        origins: which web pages may connect; None: any (tests and benchmarks).
+    """
+
+    def __init__(self, robot: VirtualRobot, admin_token: str,
+                 period_s: float = TICK_PERIOD_S, limits: ClientLimits | None = None,
+                 origins: OriginPolicy | None = None) -> None:
+        super().__init__(admin_token, limits, origins)
+        self.host = RobotHost(robot, Schedule(period_s))
+
+    @property
+    def robot(self) -> VirtualRobot:
+        """The robot served."""
+        return self.host.robot
+
+    @property
+    def bridge(self) -> Bridge:
+        """The robot's bridge."""
+        return self.host.bridge
+
+    @property
+    def stats(self) -> TickStats:
+        """The robot's tick statistics."""
+        return self.host.stats
+
+    def route(self, path: str) -> tuple[RobotHost, str | None] | str:
+        """The one robot, whatever the path (a proxy may pass its own), but ``/robots/...``."""
+        if path.startswith(ROBOTS_PREFIX):
+            return "this server runs one robot, not a class: connect to ws://HOST:PORT/"
+        return self.host, None
+
+    async def run_ticks(self) -> None:
+        """Run the robot's tick loop forever."""
+        await self.host.run_ticks()
+
+    def health(self) -> dict[str, Any]:
+        """A small status report: uptime, the robot's ticks, jitter, clients and faults."""
+        return {**self.host.health(), "uptime_s": self._uptime_s()}
 
 
 class ClientConnection:
@@ -305,7 +367,7 @@ def _peer(connection: ServerConnection) -> str:
     return str(address)
 
 
-async def start_websocket(server: SimServer, host: str, port: int) -> Server:
+async def start_websocket(server: WebSocketFront, host: str, port: int) -> Server:
     """Listen for rosbridge clients on ``host:port`` within ``server.limits``."""
     listening: Server = await serve(
         server.handle_connection, host, port, process_request=server.process_request,

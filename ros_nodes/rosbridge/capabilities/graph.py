@@ -69,6 +69,11 @@ class GraphRelay:
             for topic in self._bridge.topics.subscribed_topics():
                 self.subscribe(None, topic, None)
 
+    @property
+    def attached(self) -> bool:
+        """Whether a graph is attached (``--ros``)."""
+        return self._graph is not None
+
     def topic_types(self) -> Mapping[str, str]:
         """The graph's topics and types (none without a graph)."""
         return {} if self._graph is None else self._graph.topic_types()

@@ -1,0 +1,179 @@
+"""A class: one independent robot per student on one server, by name.
+
+``Classroom`` is the one registry of tenants (STYLE 16): it creates a ``RobotHost`` (its
+simulation, bridge and token) per roster entry, or on first connection in an open class,
+and nothing of one robot is reachable from another's objects. All robots follow one tick
+``Schedule``; a robot nobody has been connected to for the idle time stops ticking.
+
+Roster files: one student a line, ``name`` or ``name,world`` or ``name,world,token``
+(names ``[a-z0-9_-]{1,32}``; an empty world field means the server's ``--world``); ``#``
+starts a comment.
+"""
+
+from __future__ import annotations
+
+import hmac
+import re
+import secrets
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from physics import ConfigError
+from ros_nodes.rosbridge.robot_host import RobotHost, Schedule
+from ros_nodes.virtual_robot_core import VirtualRobot
+
+ROBOT_NAME = re.compile(r"[a-z0-9_-]{1,32}")
+"""What a robot (student) name may be: it becomes a URL path segment and a ROS namespace."""
+
+DEFAULT_MAX_ROBOTS = 200
+"""Most robots an open class enrols (``--max-robots``)."""
+
+DEFAULT_IDLE_PAUSE_S = 600.0
+"""A robot nobody has been connected to for this long stops ticking (``--idle-pause``)."""
+
+TOKEN_BYTES = 12
+"""Random bytes of a generated robot token (16 URL-safe characters)."""
+
+
+@dataclass(frozen=True)
+class Student:
+    """One roster entry.
+
+    Attributes:
+        name: the robot's name (``[a-z0-9_-]{1,32}``): ``/robots/NAME``.
+        world: a world for this robot (file or shipped name); None: the server's.
+        token: the robot's own admin token; None: a random one is made.
+    """
+
+    name: str
+    world: str | None = None
+    token: str | None = None
+
+
+def check_name(name: str, where: str = "robot name") -> str:
+    """``name`` if it is a valid robot name; ConfigError otherwise."""
+    if not ROBOT_NAME.fullmatch(name):
+        raise ConfigError(f"{where}: '{name[:40]}' is not a robot name (1 to 32 of a-z, 0-9, "
+                          "_ and -)")
+    return name
+
+
+def read_roster(path: str | Path) -> list[Student]:
+    """The students of a roster file, in order.
+
+    Raises:
+        ConfigError: unreadable file, a bad or repeated name, too many fields; the message
+            names the file and the line.
+    """
+    source = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as error:
+        raise ConfigError(f"{source}: cannot read roster: {error.strerror}") from None
+    students: list[Student] = []
+    seen: set[str] = set()
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        fields = [field.strip() for field in line.split(",")]
+        where = f"{source}:{number}"
+        if len(fields) > 3:
+            raise ConfigError(f"{where}: expected name[,world[,token]], got {len(fields)} "
+                              "fields")
+        name = check_name(fields[0], where)
+        if name in seen:
+            raise ConfigError(f"{where}: '{name}' is on the roster twice")
+        seen.add(name)
+        world = fields[1] if len(fields) > 1 and fields[1] else None
+        token = fields[2] if len(fields) > 2 and fields[2] else None
+        students.append(Student(name, world, token))
+    if not students:
+        raise ConfigError(f"{source}: the roster names no student")
+    return students
+
+
+def numbered_roster(count: int) -> list[Student]:
+    """``robot01`` ... ``robotNN`` (at least two digits)."""
+    if not 1 <= count <= DEFAULT_MAX_ROBOTS * 10:
+        raise ConfigError(f"--class: between 1 and {DEFAULT_MAX_ROBOTS * 10} robots, "
+                          f"got {count}")
+    width = max(2, len(str(count)))
+    return [Student(f"robot{index:0{width}d}") for index in range(1, count + 1)]
+
+
+class Classroom:
+    """Every robot of one server, by name.
+
+    Args:
+        roster: the students known at start.
+        make_robot: builds a student's robot (its world, the server's parameters).
+        schedule: the tick schedule all robots follow.
+        open_class: enrol unknown names on their first connection.
+        max_robots: most robots an open class holds.
+        idle_pause_s: a robot nobody has been connected to for this long pauses.
+        make_token: makes a robot's token when the roster gives none.
+    """
+
+    def __init__(self, roster: list[Student], make_robot: Callable[[Student], VirtualRobot],
+                 schedule: Schedule | None = None, *, open_class: bool = False,
+                 max_robots: int = DEFAULT_MAX_ROBOTS,
+                 idle_pause_s: float | None = DEFAULT_IDLE_PAUSE_S,
+                 make_token: Callable[[], str] = lambda: secrets.token_urlsafe(TOKEN_BYTES)
+                 ) -> None:
+        self.schedule = schedule or Schedule()
+        self.open_class = open_class
+        self.max_robots = max(max_robots, len(roster))
+        self._make_robot = make_robot
+        self._idle_pause_s = idle_pause_s
+        self._make_token = make_token
+        self._hosts: dict[str, RobotHost] = {}
+        self._tokens: dict[str, str] = {}
+        self.students: dict[str, Student] = {}
+        for student in roster:
+            self._enrol(student)
+
+    def _enrol(self, student: Student) -> RobotHost:
+        host = RobotHost(self._make_robot(student), self.schedule, self._idle_pause_s)
+        self._hosts[student.name] = host
+        self._tokens[student.name] = student.token or self._make_token()
+        self.students[student.name] = student
+        return host
+
+    def __iter__(self) -> Iterator[tuple[str, RobotHost]]:
+        return iter(list(self._hosts.items()))
+
+    def __len__(self) -> int:
+        return len(self._hosts)
+
+    def get(self, name: str) -> RobotHost | None:
+        """The robot ``name``; in an open class a valid new name enrols (up to the limit).
+
+        None: no such robot (unknown, invalid, or the open class is full).
+        """
+        host = self._hosts.get(name)
+        if host is not None or not self.open_class or not ROBOT_NAME.fullmatch(name):
+            return host
+        if len(self._hosts) >= self.max_robots:
+            return None
+        return self._enrol(Student(name))
+
+    def token(self, name: str) -> str:
+        """Robot ``name``'s own admin token."""
+        return self._tokens[name]
+
+    def is_robot_token(self, name: str, presented: str | None) -> bool:
+        """Constant-time check of a token presented for robot ``name``."""
+        expected = self._tokens.get(name)
+        if not presented or expected is None:
+            return False
+        return hmac.compare_digest(presented.encode(), expected.encode())
+
+    async def run_ticks(self) -> None:
+        """Tick every robot on the one schedule, forever (each robot's faults stay its own)."""
+        await self.schedule.run(self._tick_all)
+
+    def _tick_all(self, lateness_s: float) -> None:
+        for _, host in self:
+            host.tick(lateness_s)

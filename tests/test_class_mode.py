@@ -1,0 +1,330 @@
+"""Class mode: a robot per student on one ``websim serve --class``, each isolated, by name.
+
+Against a real server process with real WebSocket and HTTP clients: what one robot's clients
+publish, latch or reset never reaches another robot; unknown names are refused with a reason;
+each robot's token is admin there only; the instructor's everywhere; pages and their
+``config.json`` are per robot; idle robots pause and resume with their state.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import csv
+import json
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import websockets
+
+from physics import ConfigError, Simulation, load_world
+from ros_nodes.rosbridge.classroom import Classroom, Student, numbered_roster, read_roster
+from ros_nodes.rosbridge.robot_host import RobotHost
+from ros_nodes.rosbridge.session import Session
+from ros_nodes.virtual_robot_core import VirtualRobot
+
+from server_process import ADMIN_TOKEN, ServerProcess, start_server, wait_for
+
+TWIST = {"linear": {"x": 0.3}, "angular": {"z": 0.0}}
+CAROL_TOKEN = "carols-own-token"
+
+
+@pytest.fixture(scope="module")
+def roster(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("class") / "roster.txt"
+    path.write_text("# a class\nalice\nbob, maze\ncarol,,carols-own-token\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def links(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("links") / "links.csv"
+
+
+@pytest.fixture(scope="module")
+def server(roster: Path, links: Path) -> Iterator[ServerProcess]:
+    running = start_server(["--class", str(roster), "--links", str(links)])
+    yield running
+    running.stop()
+
+
+def robot_url(server: ServerProcess, name: str, token: str | None = None) -> str:
+    return f"ws://127.0.0.1:{server.ws_port}/robots/{name}" + (f"?token={token}"
+                                                                if token else "")
+
+
+async def first(ws: Any, topic: str) -> dict[str, Any]:
+    while True:
+        message = json.loads(await asyncio.wait_for(ws.recv(), 5))
+        if message.get("topic") == topic:
+            return dict(message["msg"])
+
+
+async def ground_truth_x(url: str) -> float:
+    async with websockets.connect(url) as ws:
+        await ws.send(json.dumps({"op": "subscribe", "topic": "/ground_truth"}))
+        return float((await first(ws, "/ground_truth"))["pose"]["pose"]["position"]["x"])
+
+
+async def call(url: str, service: str, args: dict[str, Any]) -> dict[str, Any]:
+    async with websockets.connect(url) as ws:
+        await ws.send(json.dumps({"op": "call_service", "service": service, "id": "c",
+                                  "args": args}))
+        while True:
+            reply = json.loads(await asyncio.wait_for(ws.recv(), 5))
+            if reply.get("op") == "service_response":
+                return dict(reply)
+
+
+def set_mass(url: str, mass_kg: float) -> dict[str, Any]:
+    return asyncio.run(call(url, "/virtual_robot/set_parameters", {"parameters": [
+        {"name": "mass_kg", "value": {"type": 3, "double_value": mass_kg}}]}))
+
+
+# ---- rosters -----------------------------------------------------------------------------
+
+def test_roster_lines_give_names_worlds_and_tokens(roster: Path) -> None:
+    assert read_roster(roster) == [Student("alice"), Student("bob", "maze"),
+                                   Student("carol", None, CAROL_TOKEN)]
+    assert [s.name for s in numbered_roster(3)] == ["robot01", "robot02", "robot03"]
+    assert numbered_roster(120)[-1].name == "robot120"
+
+
+@pytest.mark.parametrize("text, reason", [
+    ("alice\nAlice\n", "roster.txt:2: 'Alice' is not a robot name"),
+    ("alice\nalice\n", "roster.txt:2: 'alice' is on the roster twice"),
+    ("a,b,c,d\n", "roster.txt:1: expected name[,world[,token]], got 4 fields"),
+    ("x" * 33 + "\n", "is not a robot name (1 to 32 of a-z, 0-9, _ and -)"),
+    ("# nobody\n\n", "roster.txt: the roster names no student"),
+])
+def test_bad_rosters_name_the_file_and_line(tmp_path: Path, text: str, reason: str) -> None:
+    path = tmp_path / "roster.txt"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as error:
+        read_roster(path)
+    assert reason in str(error.value)
+
+
+def test_a_bad_world_on_the_roster_stops_the_server_with_the_reason(tmp_path: Path) -> None:
+    path = tmp_path / "roster.txt"
+    path.write_text("alice\nbob,no_such_world\n")
+    result = subprocess.run([sys.executable, "-m", "websim.cli", "serve", "--class", str(path)],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert "no_such_world" in result.stderr
+
+
+# ---- isolation ---------------------------------------------------------------------------
+
+def test_driving_one_robot_leaves_the_others_where_they_are(server: ServerProcess) -> None:
+    async def drive() -> tuple[float, float]:
+        async with websockets.connect(robot_url(server, "alice")) as alice:
+            await alice.send(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": TWIST}))
+            await asyncio.sleep(1.0)
+            await alice.send(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": {}}))
+        return (await ground_truth_x(robot_url(server, "alice")),
+                await ground_truth_x(robot_url(server, "carol")))
+
+    alice_x, carol_x = asyncio.run(drive())
+    assert alice_x > 0.2
+    assert carol_x == 0.0
+
+
+def test_topics_latches_and_resets_stay_on_their_robot(server: ServerProcess) -> None:
+    async def scenario() -> tuple[list[Any], dict[str, Any], dict[str, Any]]:
+        async with websockets.connect(robot_url(server, "alice")) as alice, \
+                websockets.connect(robot_url(server, "carol")) as carol:
+            for ws in (alice, carol):
+                await ws.send(json.dumps({"op": "subscribe", "topic": "/chat"}))
+            await alice.send(json.dumps({"op": "advertise", "topic": "/chat",
+                                         "type": "std_msgs/String"}))
+            await alice.send(json.dumps({"op": "publish", "topic": "/chat", "latch": True,
+                                         "msg": {"data": "alice only"}}))
+            said = await first(alice, "/chat")
+            heard: list[Any] = []
+            with contextlib.suppress(TimeoutError):
+                heard.append(await asyncio.wait_for(first(carol, "/chat"), 0.5))
+            async with websockets.connect(robot_url(server, "carol")) as late:
+                await late.send(json.dumps({"op": "subscribe", "topic": "/chat"}))
+                with contextlib.suppress(TimeoutError):
+                    heard.append(await asyncio.wait_for(first(late, "/chat"), 0.5))
+            worlds = {}
+            for name, ws in (("alice", alice), ("bob", None)):
+                if ws is None:
+                    async with websockets.connect(robot_url(server, name)) as other:
+                        await other.send(json.dumps({"op": "subscribe", "topic": "/world"}))
+                        worlds[name] = await first(other, "/world")
+                else:
+                    await ws.send(json.dumps({"op": "subscribe", "topic": "/world"}))
+                    worlds[name] = await first(ws, "/world")
+            return heard, said, worlds
+
+    heard, said, worlds = asyncio.run(scenario())
+    assert said == {"data": "alice only"}
+    assert heard == [], "carol's clients heard alice's topic"
+    assert worlds["alice"] != worlds["bob"], "bob's robot runs the maze of his roster line"
+
+
+def test_reset_resets_only_the_callers_robot(server: ServerProcess) -> None:
+    async def scenario() -> tuple[float, float]:
+        for name in ("alice", "carol"):
+            async with websockets.connect(robot_url(server, name)) as ws:
+                await ws.send(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": TWIST}))
+                await asyncio.sleep(0.5)
+                await ws.send(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": {}}))
+        await call(robot_url(server, "carol"), "/reset_simulation", {})
+        return (await ground_truth_x(robot_url(server, "alice")),
+                await ground_truth_x(robot_url(server, "carol")))
+
+    alice_x, carol_x = asyncio.run(scenario())
+    assert alice_x > 0.1 and carol_x == 0.0
+
+
+# ---- names and rights ----------------------------------------------------------------------
+
+def test_unknown_names_and_the_root_are_refused_with_a_reason(server: ServerProcess) -> None:
+    async def refused(url: str) -> tuple[int, str]:
+        with pytest.raises(websockets.InvalidStatus) as error:
+            async with websockets.connect(url):
+                pass
+        response = error.value.response
+        return response.status_code, response.body.decode()
+
+    status, body = asyncio.run(refused(robot_url(server, "mallory")))
+    assert status == 404 and "no robot named 'mallory' in this class" in body
+    status, body = asyncio.run(refused(server.ws_url))
+    assert status == 404 and "connect to ws://HOST:PORT/robots/NAME" in body
+
+
+def test_each_robot_token_is_admin_on_its_robot_only(server: ServerProcess,
+                                                    links: Path) -> None:
+    rows = {row["name"]: row for row in csv.DictReader(links.open())}
+    assert list(rows) == ["alice", "bob", "carol"]
+    assert rows["carol"]["token"] == CAROL_TOKEN
+    alice_token = rows["alice"]["token"]
+    assert rows["alice"]["admin_page"].endswith(f"/robots/alice/admin?token={alice_token}")
+    assert rows["alice"]["websocket"].endswith(f":{server.ws_port}/robots/alice")
+
+    own = set_mass(robot_url(server, "alice", alice_token), 2.0)
+    assert own["values"]["results"][0]["successful"] is True
+    other = set_mass(robot_url(server, "bob", alice_token), 2.0)
+    assert other["result"] is False and "needs admin rights" in other["values"]
+    for name in ("alice", "bob"):
+        instructor = set_mass(robot_url(server, name, ADMIN_TOKEN), 1.2)
+        assert instructor["values"]["results"][0]["successful"] is True
+
+
+# ---- pages -------------------------------------------------------------------------------
+
+def get(url: str) -> tuple[int, str]:
+    try:
+        with urllib.request.urlopen(url, timeout=5) as response:
+            return response.status, response.read().decode()
+    except urllib.error.HTTPError as error:
+        return error.code, error.read().decode()
+
+
+def test_each_robot_has_its_page_and_the_page_learns_its_bridge(server: ServerProcess) -> None:
+    status, page = get(f"{server.http_url}/robots/bob/")
+    assert status == 200 and "<html" in page.lower()
+    status, config = get(f"{server.http_url}/robots/bob/config.json")
+    assert status == 200
+    assert json.loads(config)["ws"] == f"ws://127.0.0.1:{server.ws_port}/robots/bob"
+    assert get(f"{server.http_url}/robots/bob/admin")[0] == 200
+    assert get(f"{server.http_url}/robots/bob/js/main.js")[0] == 200
+    robot = json.loads(get(f"{server.http_url}/robots/bob/robot.json")[1])
+    assert robot["topics"]["cmd_vel"]["name"] == "/cmd_vel"
+    status, body = get(f"{server.http_url}/robots/nobody/")
+    assert status == 404 and "no robot named 'nobody'" in body
+    with urllib.request.urlopen(f"{server.http_url}/robots/bob", timeout=5) as response:
+        assert response.url.endswith("/robots/bob/")  # redirected: relative URLs need the /
+
+
+def test_health_reports_every_robot(server: ServerProcess) -> None:
+    health = server.health()
+    assert health["status"] == "ok" and health["robot_count"] == 3
+    assert set(health["robots"]) == {"alice", "bob", "carol"}
+    assert health["robots"]["bob"]["world"] != health["robots"]["alice"]["world"]
+
+
+# ---- an open class, idle robots --------------------------------------------------------------
+
+def test_an_open_class_enrols_new_names_up_to_its_limit(tmp_path: Path) -> None:
+    path = tmp_path / "roster.txt"
+    path.write_text("alice\n")
+    server = start_server(["--class", str(path), "--open-class", "--max-robots", "2"])
+    try:
+        async def scenario() -> str:
+            async with websockets.connect(robot_url(server, "dave")) as dave:
+                await dave.send(json.dumps({"op": "subscribe", "topic": "/odom"}))
+                await first(dave, "/odom")
+            with pytest.raises(websockets.InvalidStatus) as full:
+                async with websockets.connect(robot_url(server, "erin")):
+                    pass
+            return full.value.response.body.decode()
+
+        assert "the class is full (2 robots)" in asyncio.run(scenario())
+        assert set(server.health()["robots"]) == {"alice", "dave"}
+    finally:
+        server.stop()
+
+
+def test_a_robot_nobody_uses_pauses_and_resumes_with_its_state(tmp_path: Path) -> None:
+    server = start_server(["--class", "2", "--idle-pause", "0.5"])
+    url = robot_url(server, "robot01")
+    try:
+        async def drive() -> None:
+            async with websockets.connect(url) as ws:
+                await ws.send(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": TWIST}))
+                await asyncio.sleep(0.3)
+
+        asyncio.run(drive())  # robot01 keeps the command: it drives on until it pauses
+        wait_for(lambda: server.health()["robots"]["robot01"]["paused"], 5.0, "robot01 paused")
+        ticks = server.health()["robots"]["robot01"]["ticks"]
+        time.sleep(0.5)
+        assert server.health()["robots"]["robot01"]["ticks"] == ticks
+        assert server.health()["paused_robots"] == 2
+        x = asyncio.run(ground_truth_x(url))  # connecting resumes it, where it was
+        assert 0.0 < x < 3.0
+        assert server.health()["robots"]["robot01"]["ticks"] > ticks
+    finally:
+        server.stop()
+
+
+# ---- in-process: one schedule, scans only when wanted ----------------------------------------
+
+def test_a_scan_is_cast_only_when_someone_subscribes_to_it() -> None:
+    host = RobotHost(VirtualRobot(Simulation(load_world("maze"), seed=0)))
+    for _ in range(10):
+        host.tick()
+    assert host.stats.scans_cast == 0
+    session = Session("reader", False)
+    host.bridge.connect(session)
+    host.bridge.handle(session, json.dumps({"op": "subscribe", "topic": "/scan"}))
+    for _ in range(10):
+        host.tick()
+    assert host.stats.scans_cast == 5
+
+
+def test_classroom_robots_are_independent_objects() -> None:
+    made: list[VirtualRobot] = []
+
+    def make(student: Student) -> VirtualRobot:
+        made.append(VirtualRobot(Simulation(load_world(student.world or "empty"), seed=0)))
+        return made[-1]
+
+    classroom = Classroom(numbered_roster(2), make, idle_pause_s=None)
+    (_, first_host), (_, second_host) = list(classroom)
+    assert first_host.bridge is not second_host.bridge
+    assert first_host.robot.sim is not second_host.robot.sim
+    assert first_host.schedule is second_host.schedule is classroom.schedule
+    assert classroom.get("robot03") is None, "a closed class enrols nobody"
+    assert classroom.is_robot_token("robot01", classroom.token("robot01"))
+    assert not classroom.is_robot_token("robot02", classroom.token("robot01"))

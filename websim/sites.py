@@ -1,0 +1,140 @@
+"""What ``websim serve`` runs: one robot, or a class of them, with the documents its pages read.
+
+A ``Site`` joins the WebSocket front (``SimServer`` or ``ClassServer``) to what the page
+server fills itself (``LiveDocuments``: ``robot.json``, a class robot's ``config.json``) and
+to the URLs the banner prints. ``single_robot`` and ``classroom_site`` build them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import socket
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from physics import ConfigError
+from ros_nodes.robot_description import robot_json
+from ros_nodes.rosbridge.class_server import ClassServer
+from ros_nodes.rosbridge.classroom import (
+    Classroom,
+    Student,
+    numbered_roster,
+    read_roster,
+)
+from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy
+from ros_nodes.rosbridge.robot_host import RobotHost
+from ros_nodes.rosbridge.server import ROBOTS_PREFIX, SimServer, WebSocketFront
+from ros_nodes.virtual_robot_core import VirtualRobot
+
+
+@dataclass
+class Site:
+    """A server's robots, as the WebSocket front, the page server and the banner see them.
+
+    Attributes:
+        front: the WebSocket front.
+        banner: lines the banner prints after the URLs.
+        robot: the single robot (None for a class).
+        hosts: finds a class's robot by name (None for a single robot).
+        ws_port: the WebSocket port, for the ``config.json`` a class's pages read.
+    """
+
+    front: WebSocketFront
+    banner: list[str] = field(default_factory=list)
+    robot: VirtualRobot | None = None
+    hosts: Callable[[str], RobotHost | None] | None = None
+    ws_port: int = 9090
+
+    def has_robot(self, name: str) -> bool:
+        """Whether ``/robots/NAME/`` is a robot's page (an open class enrols NAME)."""
+        return self.hosts is not None and self.hosts(name) is not None
+
+    def document(self, robot: str | None, name: str, hostname: str) -> str | None:
+        """The live ``robot.json`` of a robot, and a class robot's ``config.json``."""
+        if robot is None:
+            if name == "robot.json" and self.robot is not None:
+                return robot_json(self.robot.sim.params, self.robot.sim.lidar.params)
+            return None
+        host = self.hosts(robot) if self.hosts is not None else None
+        if host is None:
+            return None
+        if name == "robot.json":
+            return robot_json(host.robot.sim.params, host.robot.sim.lidar.params)
+        url = f"ws://{_url_name(hostname)}:{self.ws_port}{ROBOTS_PREFIX}{robot}"
+        return json.dumps({"about": f"robot {robot} of this class, filled by websim serve",
+                           "ws": url, "adminWs": url})
+
+
+def single_robot(robot: VirtualRobot, token: str, limits: ClientLimits,
+                 origins: OriginPolicy) -> Site:
+    """Today's websim: one robot at ``ws://HOST:9090/``."""
+    return Site(SimServer(robot, token, limits=limits, origins=origins), robot=robot)
+
+
+def class_roster(spec: str) -> list[Student]:
+    """``--class``: a roster file, or a number of robots (``robot01``...)."""
+    if spec.isdigit():
+        return numbered_roster(int(spec))
+    return read_roster(spec)
+
+
+def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], VirtualRobot],
+                   token: str, limits: ClientLimits, origins: OriginPolicy) -> Site:
+    """A class: robot NAME at ``ws://HOST:9090/robots/NAME``, its page at ``/robots/NAME/``.
+
+    Writes the links file when ``--links`` asks for one.
+
+    Raises:
+        ConfigError: a bad roster or world (the message names the file and line).
+    """
+    classroom = Classroom(class_roster(args.class_spec), make_robot,
+                          open_class=args.open_class, max_robots=args.max_robots,
+                          idle_pause_s=args.idle_pause)
+    site = Site(ClassServer(classroom, token, limits=limits, origins=origins),
+                hosts=classroom.get, ws_port=args.ws_port)
+    names = [name for name, _ in classroom]
+    site.banner.append(f"class:     {len(names)} robots ({names[0]} ... {names[-1]}), each at "
+                       f"{ROBOTS_PREFIX}NAME/ on both ports"
+                       f"{'; new names enrol (open class)' if args.open_class else ''}")
+    if args.links is not None:
+        write_links(Path(args.links), classroom, public_host(args.host), args.http_port,
+                    args.ws_port)
+        site.banner.append(f"links:     {args.links} (name, page, admin page with the robot's "
+                           "token, WebSocket, token)")
+    return site
+
+
+def public_host(bind: str) -> str:
+    """The host name students use: the machine's name when bound to every interface."""
+    if bind in ("0.0.0.0", "::", ""):
+        return socket.gethostname()
+    return "localhost" if bind == "127.0.0.1" else bind
+
+
+def write_links(path: Path, classroom: Classroom, host: str, http_port: int,
+                ws_port: int) -> None:
+    """The instructor's hand-out: one row per robot (name, page, admin page, WebSocket, token).
+
+    Raises:
+        ConfigError: the file cannot be written.
+    """
+    name_in_url = _url_name(host)
+    try:
+        with path.open("w", newline="", encoding="utf-8") as stream:
+            writer = csv.writer(stream)
+            writer.writerow(["name", "page", "admin_page", "websocket", "token"])
+            for name, _ in classroom:
+                token = classroom.token(name)
+                page = f"http://{name_in_url}:{http_port}{ROBOTS_PREFIX}{name}/"
+                writer.writerow([name, page, f"{page}admin?token={token}",
+                                 f"ws://{name_in_url}:{ws_port}{ROBOTS_PREFIX}{name}", token])
+    except OSError as error:
+        raise ConfigError(f"--links {path}: cannot write: {error.strerror}") from None
+
+
+def _url_name(hostname: str) -> str:
+    """A host name as it stands in a URL (IPv6 addresses in brackets)."""
+    return f"[{hostname}]" if ":" in hostname else hostname
