@@ -3,8 +3,8 @@
 The browser is Debian's ``/usr/bin/chromium`` driven by Python Playwright (never
 ``playwright install``: no browser downloads). What the robot did is checked on the bridge with
 a raw rosbridge WebSocket client (``/odom``, ``/cmd_vel``, services), not in the page's DOM. The
-pure frontend modules (PID, message conversions, connection, teleop) are unit-tested under
-Node's own test runner (``tests/web/*.test.mjs``).
+pure frontend modules (PID, message conversions, connection, teleop, who else drives) are
+unit-tested under Node's own test runner (``tests/web/*.test.mjs``).
 
 The page takes every robot fact (topics, limits, parameters) from ``web-interface/robot.json``;
 these tests read the same file rather than restating it. The admin token goes only to the
@@ -380,6 +380,54 @@ def test_no_driving_from_a_text_field_and_focus_loss_stops(server: ServerProcess
         assert twist_pairs(bridge.messages("/cmd_vel"))[-1] == (0.0, 0.0)
         page.keyboard.up("w")
     assert x_of(stopped) > 0
+
+
+OTHER_DRIVER_SHOWS = """() => {
+    const badge = document.querySelector('#other-driver');
+    window.otherDriverShown = 0;
+    new MutationObserver(() => { if (!badge.hidden) window.otherDriverShown += 1; })
+      .observe(badge, {attributes: true, attributeFilter: ['hidden']});
+}"""
+"""Counts, in window.otherDriverShown, every time the page shows its "another client" badge."""
+
+
+@needs_browser
+def test_another_client_driving_shows_a_badge_the_pages_own_driving_does_not(
+        server: ServerProcess, bridge: Bridge, browser: Any) -> None:
+    cmd_vel = ROBOT["topics"]["cmd_vel"]
+    with driving_page(browser, bridge, page_url(server),
+                      viewport={"width": 1280, "height": 860}) as (page, log):
+        page.evaluate(OTHER_DRIVER_SHOWS)
+        assert page.is_hidden("#other-driver")
+        # The page's own commands come back to it from the bridge: they are not foreign.
+        odoms_before = len(bridge.messages("/odom"))
+        page.keyboard.down("ArrowUp")
+        wait_for(lambda: [m for m in bridge.messages("/odom")[odoms_before:] if x_of(m) > 0],
+                 what="the page to drive the robot")
+        time.sleep(1.0)
+        page.keyboard.up("ArrowUp")
+        wait_until_still(bridge)
+        time.sleep(0.5)  # the zero Twist's echo has come back too
+        assert page.evaluate("window.otherDriverShown") == 0
+
+        other = Bridge(server.ws_url)  # another student on the same robot
+        try:
+            for linear in (0.1, 0.1, 0.1, 0.1, 0.0):
+                other.send(op="publish", topic=cmd_vel["name"], type=cmd_vel["type"],
+                           msg={"linear": {"x": linear}, "angular": {"z": 0}})
+                time.sleep(0.1)
+            last_sent = time.monotonic()
+            badge = page.wait_for_selector("#other-driver:not([hidden])", timeout=2000)
+            assert badge.text_content() == "Another client is driving this robot"
+            screenshot(page, "main-other-driver.png", full_page=False)
+            page.wait_for_selector("#other-driver[hidden]", state="attached", timeout=3000)
+            gone_after_s = time.monotonic() - last_sent
+        finally:
+            other.close()
+        wait_until_still(bridge)
+        assert log.console_errors == [] and log.page_errors == []
+    # Shown for 1 s after the last foreign command reached the page, which was after it was sent.
+    assert 0.9 < gone_after_s < 2.5
 
 
 def _pixel_boxes(page: Any) -> dict[str, Any]:

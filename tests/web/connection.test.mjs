@@ -170,6 +170,20 @@ test('reconnects after a close, re-subscribes, and drops publishes while down', 
     'connecting', 'connected']);
 });
 
+test('what the page\'s publishers send is announced as published; dropped messages are not',
+  () => {
+    const { ROSLIB, sockets } = fakeRoslib();
+    const connection = new Connection(ROSLIB, { url: 'ws://h:9090' });
+    const published = [];
+    connection.addEventListener('published', (e) => published.push(e.detail));
+    const cmdVel = connection.publisher('/cmd_vel', 'geometry_msgs/msg/Twist');
+    connection.connect();
+    cmdVel.publish({ n: 1 }); // not connected yet: dropped
+    sockets[0].emit('connection');
+    cmdVel.publish({ n: 2 });
+    assert.deepEqual(published, [{ topic: '/cmd_vel', msg: { n: 2 } }]);
+  });
+
 test('close() says last words first and never reconnects', (t) => {
   t.mock.timers.enable({ apis: ['setTimeout'] });
   const { ROSLIB, sockets } = fakeRoslib();

@@ -96,7 +96,7 @@ async function main() {
   });
   const bar = bindConnectionBar(connection, {
     form: $('#connect-form'), input: $('#ws-url'), status: $('#conn-status'),
-    message: $('#view-message'),
+    message: $('#view-message'), otherDriver: $('#other-driver'),
   }, robot);
   const state = createState();
   subscribeRobot(connection, state, robot);

@@ -1,18 +1,23 @@
-// The connection controls every page has: the bridge URL field, the status badge, and the
-// message over the view that says what is wrong when nothing can be shown.
+// The connection controls every page has: the bridge URL field, the status badge, the
+// message over the view that says what is wrong when nothing can be shown, and the badge that
+// says another client is driving the robot (drivers.js decides who).
 
 import { resolveWsUrl } from './connection.js';
+import { othersDriving } from './drivers.js';
 
 const WAITING_MS = 2000; // connected but no odometry for this long: say so
 
 /**
  * @param {Connection} connection
  * @param {{form: HTMLFormElement, input: HTMLInputElement, status: HTMLElement,
- *          message: HTMLElement}} elements
+ *          message: HTMLElement, otherDriver?: HTMLElement}} elements otherDriver: shown while
+ *   another client's velocity commands arrive
  * @param {object} robot the robot description (robot.js): the odometry topic it waits for
  * @returns {{update: (nowMs: number, state: object) => void}}
  */
-export function bindConnectionBar(connection, { form, input, status, message }, robot) {
+export function bindConnectionBar(connection, {
+  form, input, status, message, otherDriver = null,
+}, robot) {
   const odomTopic = robot.topics.odom.name;
   let connectedAtMs = null;
   input.value = connection.url;
@@ -45,6 +50,8 @@ export function bindConnectionBar(connection, { form, input, status, message }, 
       } else {
         show('');
       }
+      const foreign = connection.isConnected && othersDriving(state.drivers, nowMs);
+      if (otherDriver && otherDriver.hidden === foreign) otherDriver.hidden = !foreign;
     },
   };
 }

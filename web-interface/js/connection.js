@@ -153,7 +153,8 @@ export class ServiceCallError extends Error {
  * Events (EventTarget): 'status' with detail {status, url, message}, where status is one of
  * connecting, connected, closed, error; 'connected'; 'disconnected'; 'beforeclose' (sent
  * while still connected, before the page closes the socket itself: last words such as a zero
- * velocity command go there).
+ * velocity command go there); 'published' with detail {topic, msg} after each message this
+ * page's publishers sent.
  */
 export class Connection extends EventTarget {
   /**
@@ -236,6 +237,7 @@ export class Connection extends EventTarget {
           });
         }
         entry.handle.publish(new this.ROSLIB.Message(msg));
+        this.dispatchEvent(new CustomEvent('published', { detail: { topic, msg } }));
         return true;
       },
     };

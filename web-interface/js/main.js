@@ -20,7 +20,7 @@ async function main() {
   const connection = new Connection(ROSLIB, { url: initialWsUrl(window.location, config.ws) });
   const bar = bindConnectionBar(connection, {
     form: $('#connect-form'), input: $('#ws-url'), status: $('#conn-status'),
-    message: $('#view-message'),
+    message: $('#view-message'), otherDriver: $('#other-driver'),
   }, robot);
   subscribeRobot(connection, state, robot);
   const view = createView(state, robot);

@@ -7,6 +7,7 @@ import {
   clearTrail, onCommand, onGroundTruth, onOdometry, onScan, onTfStatic, onWorld,
 } from './state.js';
 import { twistValues } from './ros-msgs.js';
+import { noteCommand, noteOwnCommand } from './drivers.js';
 import { View } from './view.js';
 import {
   bindButtons, bindJoystick, bindKeys, bindSpeedSliders, Teleop,
@@ -31,6 +32,11 @@ export function subscribeRobot(connection, state, robot) {
   on('cmd_vel', (m) => {
     const { linear, angular } = twistValues(m); // any client's command: what the robot obeys
     onCommand(state, linear, angular);
+    noteCommand(state.drivers, m, now()); // ours come back too: drivers.js tells them apart
+  });
+  connection.addEventListener('published', (event) => { // teleop, joystick, PID, stop
+    const { topic, msg } = event.detail;
+    if (topic === robot.topics.cmd_vel.name) noteOwnCommand(state.drivers, msg, now());
   });
   connection.addEventListener('connected', () => clearTrail(state));
 }

@@ -6,6 +6,7 @@
 import {
   applyMarkerArray, markerBounds, poseFromOdometry, scanPoints, transformFromTf,
 } from './ros-msgs.js';
+import { createDrivers } from './drivers.js';
 
 /** Seconds of history the live plots show. */
 export const HISTORY_S = 20;
@@ -34,6 +35,7 @@ export function createState() {
     worldVersion: 0, // bumped on every /world: view.js re-renders its wall layer
     trail: { frame: null, points: [] }, // points {x, y, tMs, gap}; gap: no line to it
     command: { linear: 0, angular: 0 }, // the latest /cmd_vel (m/s, rad/s)
+    drivers: createDrivers(), // whose /cmd_vel that is: this page's or another client's
     setpointDeg: null, // the heading PID's setpoint while it runs
     history: {
       t: [], vCmd: [], vMeas: [], wCmd: [], wMeas: [], headingDeg: [], setpointDeg: [],
