@@ -10,7 +10,8 @@ Every client (student or admin) may:
   the graph), but not the simulator's outputs (``/odom``, ``/scan``, ``/tf``...; refused by the
   bridge) nor ROS infrastructure topics (``/rosout``, ``/parameter_events``);
 * call any service (changing parameters then needs the admin token), and offer services of its
-  own, but not in the simulator's namespaces (``/virtual_robot/``, ``/rosapi/``).
+  own, but not in the simulator's namespaces (``/virtual_robot/``, ``/rosapi/``,
+  ``/websim/``).
 
 Names are resolved and checked once, before this (``rosbridge.schema.resolve_name``), and one
 client may hold at most ``ClientLimits.max_subscriptions`` subscriptions, ``max_advertised``
@@ -28,7 +29,7 @@ from ros_nodes.rosbridge.limits import ClientLimits
 RESERVED_TOPICS = frozenset({"/rosout", "/parameter_events"})
 """ROS infrastructure topics clients may not publish."""
 
-RESERVED_SERVICE_PREFIXES = ("/virtual_robot/", "/rosapi/")
+RESERVED_SERVICE_PREFIXES = ("/virtual_robot/", "/rosapi/", "/websim/")
 """Service namespaces of the simulator's own nodes; clients may not offer services in them."""
 
 

@@ -53,6 +53,9 @@ class VirtualRobot:
         self.listeners: list[Callable[[list[Publication]], None]] = []
         self._clock = clock
         self._ticks_since_command = 0
+        self.collisions = 0
+        """Times the robot ran into a wall (ticks where a contact began) since it started."""
+        self._colliding = False
 
     def on_cmd_vel(self, msg: Any, stamped: bool = False) -> None:
         """Apply a ``geometry_msgs/Twist`` (or ``TwistStamped``) dict as the new command.
@@ -82,6 +85,9 @@ class VirtualRobot:
         self.sim.step()
         now = self._clock()
         state = self.sim.state()
+        if state.collided and not self._colliding:
+            self.collisions += 1
+        self._colliding = state.collided
         noise = self.sim.noise
         pose_variance = (ODOM_POSE_VARIANCE,) * 3
         twist_variance = (max(noise.odom_linear_sigma_mps**2, ODOM_TWIST_VARIANCE),

@@ -328,3 +328,80 @@ def test_classroom_robots_are_independent_objects() -> None:
     assert classroom.get("robot03") is None, "a closed class enrols nobody"
     assert classroom.is_robot_token("robot01", classroom.token("robot01"))
     assert not classroom.is_robot_token("robot02", classroom.token("robot01"))
+
+
+# ---- the instructor's view ---------------------------------------------------------------
+
+async def reply_to(ws: Any, request: dict[str, Any]) -> dict[str, Any]:
+    await ws.send(json.dumps(request))
+    while True:
+        message = json.loads(await asyncio.wait_for(ws.recv(), 5))
+        if message.get("op") in ("service_response", "status"):
+            return dict(message)
+
+
+def test_the_instructor_sees_every_robot_under_its_namespace(server: ServerProcess) -> None:
+    root = f"ws://127.0.0.1:{server.ws_port}/?token={ADMIN_TOKEN}"
+
+    async def scenario() -> dict[str, Any]:
+        seen: dict[str, Any] = {}
+        async with websockets.connect(root) as ws:
+            robots = await reply_to(ws, {"op": "call_service", "service": "/websim/robots",
+                                         "id": "r"})
+            seen["names"] = robots["values"]["names"]
+            await ws.send(json.dumps({"op": "subscribe", "topic": "/carol/odom",
+                                      "throttle_rate": 200}))
+            odom = json.loads(await asyncio.wait_for(ws.recv(), 5))
+            seen["odom_topic"] = odom["topic"]
+            seen["frame"] = odom["msg"]["header"]["frame_id"]
+            await ws.send(json.dumps({"op": "unsubscribe", "topic": "/carol/odom"}))
+            await ws.send(json.dumps({"op": "publish", "topic": "/carol/cmd_vel",
+                                      "msg": TWIST}))
+            await asyncio.sleep(0.5)
+            status = await reply_to(ws, {"op": "call_service", "id": "s",
+                                         "service": "/carol/websim/status"})
+            seen["status"] = status
+            seen["pause"] = await reply_to(ws, {"op": "call_service", "id": "p",
+                                                "service": "/bob/websim/pause",
+                                                "args": {"paused": True}})
+            seen["reset"] = await reply_to(ws, {"op": "call_service", "id": "z",
+                                                "service": "/carol/reset_simulation"})
+            seen["unknown"] = await reply_to(ws, {"op": "call_service", "id": "u",
+                                                  "service": "/mallory/reset_simulation"})
+            seen["clients_while"] = server.health()["robots"]["carol"]["clients"]
+            await reply_to(ws, {"op": "call_service", "service": "/bob/websim/pause", "id": "q",
+                                "args": {"paused": False}})
+        return seen
+
+    seen = asyncio.run(scenario())
+    assert seen["names"] == ["alice", "bob", "carol"]
+    assert seen["odom_topic"] == "/carol/odom" and seen["frame"] == "odom"
+    status = seen["status"]
+    assert status["service"] == "/carol/websim/status" and status["result"] is True
+    assert status["values"]["speed_mps"] > 0.0, "the instructor drove carol"
+    assert status["values"]["last_driver"].startswith("127.0.0.1:")
+    assert [c["admin"] for c in status["values"]["clients"]] == [True]
+    assert seen["pause"]["values"] == {"paused": True}
+    assert seen["reset"]["service"] == "/carol/reset_simulation" and seen["reset"]["result"]
+    assert seen["unknown"]["result"] is False
+    assert "no robot named 'mallory'" in seen["unknown"]["values"]
+    assert seen["clients_while"] == 1
+    wait_for(lambda: server.health()["robots"]["carol"]["clients"] == 0, 5.0,
+             "the instructor's hold on carol to be released")
+    assert asyncio.run(ground_truth_x(robot_url(server, "carol"))) == 0.0
+
+
+def test_the_root_without_the_instructor_token_is_refused(server: ServerProcess) -> None:
+    async def refused(url: str) -> str:
+        with pytest.raises(websockets.InvalidStatus) as error:
+            async with websockets.connect(url):
+                pass
+        return str(error.value.response.body, "utf-8")
+
+    carol = asyncio.run(refused(f"ws://127.0.0.1:{server.ws_port}/?token={CAROL_TOKEN}"))
+    assert "it needs the instructor's token" in carol
+
+
+def test_students_cannot_ask_for_status_or_pause(server: ServerProcess) -> None:
+    reply = asyncio.run(call(robot_url(server, "alice"), "/websim/status", {}))
+    assert reply["result"] is False and "needs admin rights" in reply["values"]

@@ -256,7 +256,7 @@ def test_a_second_provider_cannot_take_over_a_service(server: ServerProcess) -> 
 
     statuses, request = asyncio.run(attack())
     assert "/grade is already provided by another client" in statuses[0]["msg"]
-    assert "services under /virtual_robot/, /rosapi/ belong to the simulator" in \
+    assert "services under /virtual_robot/, /rosapi/, /websim/ belong to the simulator" in \
         statuses[1]["msg"]
     assert "private names (~) are not offered to clients" in statuses[2]["msg"]
     assert request["op"] == "call_service" and request["service"] == "/grade"

@@ -22,7 +22,6 @@ bridge goes on.
 
 from __future__ import annotations
 
-import logging
 import time
 from collections.abc import Callable
 from typing import Any
@@ -33,23 +32,13 @@ from ros_nodes.rosbridge.capabilities.graph import Graph, GraphRelay
 from ros_nodes.rosbridge.capabilities.services import SERVICE_TIMEOUT_S, Services
 from ros_nodes.rosbridge.capabilities.topics import Topics
 from ros_nodes.rosbridge.encoding import parse_json
-from ros_nodes.rosbridge.errors import BridgeError, ServiceError, shorten
+from ros_nodes.rosbridge.errors import BridgeError, ServiceError
 from ros_nodes.rosbridge.faults import Faults
 from ros_nodes.rosbridge.outbox import Frame
-from ros_nodes.rosbridge.schema import (
-    MAX_ID_CHARS,
-    MAX_ID_INTEGER,
-    NAME_FIELDS,
-    STATUS_LEVELS,
-    ProtocolError,
-    check_fields,
-    resolve_name,
-)
+from ros_nodes.rosbridge.schema import NAME_FIELDS, ProtocolError, read_operation, resolve_name
 from ros_nodes.rosbridge.session import Session
 
 __all__ = ["Bridge", "BridgeError", "Graph", "ServiceError", "Session"]
-
-log = logging.getLogger("websim.bridge")
 
 Handler = Callable[[Session, dict[str, Any]], None]
 
@@ -113,66 +102,28 @@ class Bridge:
         message: Any = None
         session.frame_bytes = len(frame)
         try:
-            if isinstance(frame, bytes):
-                raise ProtocolError("binary frames are not accepted; send JSON text")
-            try:
-                message = parse_json(frame)
-            except ValueError as error:
-                raise ProtocolError(f"invalid JSON: {error}") from None
-            if not isinstance(message, dict):
-                raise ProtocolError(f"expected a JSON object, got {type(message).__name__}")
-            op = check_fields(message)
+            op, message = read_operation(frame, parse_json)
             name_field = NAME_FIELDS.get(op)
             if name_field is not None:
                 name = message[name_field] = resolve_name(message[name_field])
                 try:
                     access.check(session, op, name)
                 except access.AccessError as denied:
-                    if op != "call_service":
-                        raise BridgeError(str(denied)) from None
-                    log.warning("client %s: %s", session.peer, denied)
-                    self.services.fail(session, message.get("id"), name, str(denied))
-                    return
+                    raise BridgeError(str(denied)) from None
             self._handlers[op](session, message)
-        except ProtocolError as error:
-            if isinstance(message, dict) and message.get("op") == "call_service" \
-                    and isinstance(message.get("service"), str):
-                self.services.fail(session, _safe_id(message), message["service"][:MAX_ID_CHARS],
-                                   shorten(str(error)))
-            self.report(session, str(error), message)
-        except (BridgeError, ConfigError) as error:
-            self.report(session, str(error), message)
+        except (ProtocolError, BridgeError, ConfigError) as error:
+            session.refuse(str(error), message)
         except Exception as error:  # a bug must not stop the bridge: record it, go on
             self.faults.record(f"handling {_op_of(message)}", error)
-            self.report(session, f"internal error handling {_op_of(message)}: "
-                                 f"{type(error).__name__}", message)
+            session.refuse(f"internal error handling {_op_of(message)}: "
+                           f"{type(error).__name__}", message)
 
     def report(self, session: Session, reason: str, message: Any = None) -> None:
-        """Log an error and, for a client that asked with set_level, send it as a status.
-
-        A reason longer than ``MAX_REASON_CHARS`` is cut: it may quote the client's input.
-        """
-        reason = shorten(reason)
-        log.warning("client %s: %s", session.peer, reason)
-        level = session.status_level
-        if level is not None and STATUS_LEVELS.index(level) <= STATUS_LEVELS.index("error"):
-            status: dict[str, Any] = {"op": "status", "level": "error", "msg": reason}
-            if isinstance(message, dict) and _safe_id(message) is not None:
-                status["id"] = _safe_id(message)
-            session.reply(status)
+        """Log an error and, for a client that asked with set_level, send it as a status."""
+        session.report(reason, message)
 
     def _set_level(self, session: Session, message: dict[str, Any]) -> None:
         session.status_level = message["level"]
-
-
-def _safe_id(message: dict[str, Any]) -> Any:
-    """The message's id if it is one the schema accepts (echoed back), else None."""
-    value = message.get("id")
-    if isinstance(value, str) and len(value) <= MAX_ID_CHARS:
-        return value
-    if isinstance(value, int) and not isinstance(value, bool) and abs(value) <= MAX_ID_INTEGER:
-        return value
-    return None
 
 
 def _op_of(message: Any) -> str:

@@ -1,6 +1,8 @@
 """The WebSocket front of a class: ``ws://HOST:9090/robots/NAME`` is robot NAME.
 
-Inside that URL everything is as on the real robot (``/cmd_vel``, ``/odom``, ``/scan``, the
+``ws://HOST:9090/`` with the instructor's token is the instructor's view of every robot, its
+names under ``/NAME/`` (``instructor_view.py``). Inside a robot's URL everything is as on the
+real robot (``/cmd_vel``, ``/odom``, ``/scan``, the
 parameter services, ``/reset_simulation``, un-namespaced), so a student's code for their
 robot works on the real robot with only the URL changed. The admin token rules every robot;
 each robot's own token rules that robot only.
@@ -11,12 +13,14 @@ from __future__ import annotations
 from typing import Any
 
 from ros_nodes.rosbridge.classroom import Classroom
+from ros_nodes.rosbridge.instructor_view import InstructorView
 from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy
-from ros_nodes.rosbridge.robot_host import RobotHost
-from ros_nodes.rosbridge.server import ROBOTS_PREFIX, WebSocketFront
+from ros_nodes.rosbridge.robot_host import RobotHost, Schedule
+from ros_nodes.rosbridge.server import ROBOTS_PREFIX, Hub, WebSocketFront
 
 ROOT_REFUSAL = ("this server hosts a class: connect to ws://HOST:PORT/robots/NAME for robot "
-                "NAME (an instructor's view of every robot at / is not offered yet)")
+                "NAME (ws://HOST:PORT/ is the instructor's view of every robot: it needs "
+                "the instructor's token)")
 
 
 class ClassServer(WebSocketFront):
@@ -46,6 +50,16 @@ class ClassServer(WebSocketFront):
         if self.classroom.open_class and len(self.classroom) >= self.classroom.max_robots:
             return f"the class is full ({self.classroom.max_robots} robots)"
         return f"no robot named '{name[:40]}' in this class"
+
+    def root_view(self, path: str, token: str | None) -> Hub | None:
+        """The instructor's view of every robot, at ``/`` with the instructor's token."""
+        if path.startswith(ROBOTS_PREFIX) or not self.is_admin_token(token):
+            return None
+        return InstructorView(self.classroom)
+
+    def schedule_of_view(self) -> Schedule:
+        """The class's schedule."""
+        return self.classroom.schedule
 
     def robot_admin(self, name: str | None, token: str | None) -> bool:
         """A robot's own token is admin on that robot."""

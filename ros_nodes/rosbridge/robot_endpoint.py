@@ -8,6 +8,7 @@ the bridge's service capability.
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from ros_nodes.rosbridge.bridge import Bridge
@@ -27,12 +28,14 @@ class RobotEndpoint:
     Attributes:
         last_driver: the address of the client whose /cmd_vel the robot took last (None: none
             yet).
+        last_drive_s: when it did (monotonic s), None before.
     """
 
     def __init__(self, bridge: Bridge, robot: VirtualRobot) -> None:
         self.bridge = bridge
         self.robot = robot
         self.last_driver: str | None = None
+        self.last_drive_s: float | None = None
         for spec in PUBLISHED_TOPICS:
             bridge.topics.own(spec.name, spec.type)
         bridge.topics.subscribe_local(CMD_VEL.name, CMD_VEL.type, self._on_cmd_vel)
@@ -43,6 +46,7 @@ class RobotEndpoint:
     def _on_cmd_vel(self, msg: Any, publisher: Session) -> None:
         self.robot.on_cmd_vel(msg)  # raises ConfigError: the reason goes to the publisher
         self.last_driver = publisher.peer
+        self.last_drive_s = time.monotonic()
 
     def publish(self, publications: list[Publication]) -> None:
         """Send one tick's messages to the subscribers."""

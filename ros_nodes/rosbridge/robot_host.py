@@ -17,14 +17,17 @@ import logging
 import math
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from physics import TICK_PERIOD_S
 from ros_nodes.rosbridge.bridge import Bridge
+from ros_nodes.rosbridge.errors import ServiceError
 from ros_nodes.rosbridge.faults import Faults
 from ros_nodes.rosbridge.robot_endpoint import RobotEndpoint
+from ros_nodes.rosbridge.robot_services import require_admin
+from ros_nodes.rosbridge.session import Session
 from ros_nodes.topics import SCAN
 from ros_nodes.virtual_robot_core import Publication, VirtualRobot
 
@@ -33,6 +36,13 @@ log = logging.getLogger("websim.robot")
 SHED_SCANS_AFTER_S = 0.025
 """A tick that starts this late (half a period: the host cannot keep up with the clients)
 publishes no /scan: the biggest message goes first, /odom and /tf keep their rate."""
+
+STATUS_SERVICE = "/websim/status"
+"""Admin only: a robot's clients and their addresses, its last driver, collisions, mode,
+payload and whether it is paused (the instructor's dashboard polls it)."""
+
+PAUSE_SERVICE = "/websim/pause"
+"""Admin only: ``{paused: true}`` holds the robot, ``{paused: false}`` lets it run."""
 
 AFTER_TICK_S = 0.002
 """Work waiting for a tick to pass resumes this long after the tick's deadline."""
@@ -156,17 +166,17 @@ class RobotHost:
         self.endpoint = RobotEndpoint(self.bridge, robot)
         self.stats = TickStats()
         self.schedule = schedule or Schedule()
+        self.held = False
+        """Paused by an admin (``/websim/pause``), whoever is connected."""
         self._idle_pause_s = idle_pause_s
         self._clock = clock
         self._last_client_s = clock()
+        self.bridge.services.add(STATUS_SERVICE, "websim/srv/RobotStatus", self._status)
+        self.bridge.services.add(PAUSE_SERVICE, "websim/srv/Pause", self._pause)
 
     async def run_ticks(self) -> None:
         """Tick this robot alone, forever."""
         await self.schedule.run(self.tick)
-
-    async def before_tick_room(self, cost_s: float) -> None:
-        """Wait until ``cost_s`` of work can run before the next tick (``Schedule.room``)."""
-        await self.schedule.room(cost_s)
 
     def _idle(self) -> bool:
         """Whether the robot should pause: nobody connected for ``idle_pause_s``."""
@@ -181,7 +191,8 @@ class RobotHost:
 
         A robot nobody has been connected to for ``idle_pause_s`` is not stepped (paused).
         """
-        self.stats.paused = self._idle()
+        idle = self._idle()  # first: it notes when clients were last here
+        self.stats.paused = self.held or idle
         if self.stats.paused:
             return
         self.stats.ticks += 1
@@ -226,6 +237,36 @@ class RobotHost:
             self.robot.reset()
         except Exception as error:
             self.faults.record("resetting the robot", error)
+
+    def _status(self, args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        """``/websim/status``: who is connected and driving, collisions, mode and payload."""
+        require_admin(session, STATUS_SERVICE)
+        params = self.robot.sim.params
+        drive_s = self.endpoint.last_drive_s
+        return {
+            "clients": [{"address": other.peer, "admin": other.is_admin}
+                        for other in sorted(self.bridge.sessions, key=lambda s: s.peer)],
+            "last_driver": self.endpoint.last_driver,
+            "last_drive_age_s": None if drive_s is None
+            else round(time.monotonic() - drive_s, 3),
+            "collisions": self.robot.collisions,
+            "mode": self.robot.sim.mode,
+            "mass_kg": params.mass_kg,
+            "inertia_kg_m2": params.inertia_kg_m2,
+            "paused": self.stats.paused,
+            "held": self.held,
+            "speed_mps": self.robot.sim.ground_truth().v,
+        }
+
+    def _pause(self, args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        """``/websim/pause`` ``{paused: bool}``: hold the robot (or let it run again)."""
+        require_admin(session, PAUSE_SERVICE)
+        paused = args.get("paused")
+        if not isinstance(paused, bool):
+            raise ServiceError(f"{PAUSE_SERVICE}: args must be {{paused: true or false}}")
+        self.held = paused
+        self.stats.paused = paused or self._idle()
+        return {"paused": self.held}
 
     def health(self) -> dict[str, Any]:
         """This robot's part of /healthz."""

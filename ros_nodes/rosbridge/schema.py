@@ -13,7 +13,7 @@ other fields the message has.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -164,6 +164,37 @@ def _check_value(op: str, name: str, spec: Field, value: Any) -> None:
         if not low <= value <= high:  # NaN fails too; huge ints compare exactly
             raise ProtocolError(f"{op}: field '{name}' must be between {low:g} and {high:g}, "
                                 f"got {_describe(value)}")
+
+
+def echoable_id(message: Any) -> Any:
+    """The message's id if it is one the schema accepts (it is echoed back), else None."""
+    value = message.get("id") if isinstance(message, dict) else None
+    if isinstance(value, str) and len(value) <= MAX_ID_CHARS:
+        return value
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) <= MAX_ID_INTEGER:
+        return value
+    return None
+
+
+def read_operation(frame: str | bytes, parse: Callable[[str], Any]) -> tuple[str, dict[str, Any]]:
+    """One incoming frame as a validated operation: (op, message).
+
+    Args:
+        frame: the WebSocket message.
+        parse: the JSON decoder (``encoding.parse_json``).
+
+    Raises:
+        ProtocolError: a binary frame, invalid JSON, not an object, or invalid fields.
+    """
+    if isinstance(frame, bytes):
+        raise ProtocolError("binary frames are not accepted; send JSON text")
+    try:
+        message = parse(frame)
+    except ValueError as error:
+        raise ProtocolError(f"invalid JSON: {error}") from None
+    if not isinstance(message, dict):
+        raise ProtocolError(f"expected a JSON object, got {type(message).__name__}")
+    return check_fields(message), message
 
 
 NAME_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")

@@ -25,7 +25,7 @@ import json
 import logging
 import socket
 import time
-from typing import Any
+from typing import Any, Protocol
 from urllib.parse import parse_qs, urlsplit
 
 from websockets.asyncio.server import Server, ServerConnection, serve
@@ -36,7 +36,7 @@ from websockets.http11 import Request, Response
 from physics import TICK_PERIOD_S
 from ros_nodes.rosbridge.bridge import Bridge
 from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy, RateLimit, TokenBucket
-from ros_nodes.rosbridge.outbox import Outbox
+from ros_nodes.rosbridge.outbox import Frame, Outbox
 from ros_nodes.rosbridge.robot_host import RobotHost, Schedule, TickStats
 from ros_nodes.rosbridge.session import Session
 from ros_nodes.virtual_robot_core import VirtualRobot
@@ -64,7 +64,7 @@ MAX_INCOMING_FRAMES = 2
 whose handling budget is spent holds at most this many frames of server memory)."""
 
 LARGE_FRAME_BYTES = 64 << 10
-"""Frames this large wait for room before the next tick (``RobotHost.before_tick_room``)."""
+"""Frames this large wait for room before the next tick (``Schedule.room``)."""
 
 HANDLING_S_PER_BYTE = 10e-9
 """A generous estimate of what handling an accepted frame costs: 10 ms per MiB (parsing,
@@ -82,6 +82,19 @@ SEND_BUFFER_BYTES = 128 << 10
 client that stops reading fills at the stream's ~100 kB/s for most of a minute before its
 outbox (bounded, newest first) takes over: 100 such clients would pin 400 MB of kernel memory.
 128 KiB is still over a second of every topic, and a LAN's bandwidth-delay product."""
+
+
+class Hub(Protocol):
+    """What a connection's frames go to: a robot's ``Bridge``, or an instructor's view."""
+
+    def connect(self, session: Session) -> None:
+        """Register the client."""
+
+    def disconnect(self, session: Session) -> None:
+        """Forget the client and all it holds."""
+
+    def handle(self, session: Session, frame: Frame) -> None:
+        """Act on one frame of the client; never raises."""
 
 
 class WebSocketFront(abc.ABC):
@@ -110,6 +123,14 @@ class WebSocketFront(abc.ABC):
             (host, name), name None for a server's single robot; or the reason to refuse.
         """
 
+    def root_view(self, path: str, token: str | None) -> Hub | None:
+        """A hub other than a robot for this path and token (an instructor's view), or None."""
+        return None
+
+    def schedule_of_view(self) -> Schedule:
+        """The tick schedule a root view's large frames make room in."""
+        return Schedule()
+
     def robot_admin(self, name: str | None, token: str | None) -> bool:
         """Whether ``token`` grants admin rights on robot ``name`` besides the admin token."""
         return False
@@ -134,9 +155,12 @@ class WebSocketFront(abc.ABC):
 
         Unknown robots get 404, a robot at ``max_clients`` 503, another site's page 403.
         """
-        path = urlsplit(request.path).path
+        target = urlsplit(request.path)
+        path = target.path
         if path == "/healthz":
             return json_response(self.health())
+        if self.root_view(path, _token(target.query)) is not None:
+            return self._check_origin(connection, request)
         routed = self.route(path)
         if isinstance(routed, str):
             log.warning("refused a WebSocket from %s for %s: %s", _peer(connection),
@@ -149,6 +173,10 @@ class WebSocketFront(abc.ABC):
             return connection.respond(http.HTTPStatus.SERVICE_UNAVAILABLE,
                                       f"this robot serves at most {self.limits.max_clients} "
                                       "clients at once; try again later\n")
+        return self._check_origin(connection, request)
+
+    def _check_origin(self, connection: ServerConnection,
+                      request: Request) -> Response | None:
         origin = request.headers.get("Origin")
         if self._origins is not None and not self._origins.allows(
                 origin, request.headers.get("Host")):
@@ -163,15 +191,22 @@ class WebSocketFront(abc.ABC):
         """Serve one client until it goes."""
         peer = _peer(connection)
         target = urlsplit(connection.request.path if connection.request else "")
+        token = _token(target.query)
+        view = self.root_view(target.path, token)
+        if view is not None:
+            log.info("instructor %s connected to the class's root view", peer)
+            await ClientConnection(view, self.schedule_of_view(), connection, peer, True,
+                                   self.limits).run()
+            return
         routed = self.route(target.path)
         if isinstance(routed, str):  # pragma: no cover - refused at the handshake
             return
         host, name = routed
-        token = parse_qs(target.query).get("token", [None])[0]
         is_admin = self.is_admin_token(token) or self.robot_admin(name, token)
         if token and not is_admin:
             log.warning("client %s presented a wrong admin token", peer)
-        await ClientConnection(host, connection, peer, is_admin, self.limits).run()
+        await ClientConnection(host.bridge, host.schedule, connection, peer, is_admin,
+                               self.limits).run()
 
     def _uptime_s(self) -> float:
         return round(time.monotonic() - self.started_monotonic_s, 3)
@@ -228,17 +263,19 @@ class ClientConnection:
     """One client's connection: its session, reader, writer and watchdog.
 
     Args:
-        host: the robot it talks to.
+        hub: what its frames go to: the bridge of the robot it talks to (or the instructor's
+            view of a class).
+        schedule: the tick schedule large frames make room in.
         connection: its WebSocket.
         peer: its address, for logs.
         is_admin: whether it presented the admin token.
         limits: the bounds it lives within.
     """
 
-    def __init__(self, host: RobotHost, connection: ServerConnection, peer: str,
+    def __init__(self, hub: Hub, schedule: Schedule, connection: ServerConnection, peer: str,
                  is_admin: bool, limits: ClientLimits) -> None:
-        self._host = host
-        self._bridge = host.bridge
+        self._schedule = schedule
+        self._bridge = hub
         self._connection = connection
         self._peer = peer
         self._limits = limits
@@ -279,7 +316,7 @@ class ClientConnection:
                 if wait_s > 0:  # its budget is spent: its frames wait, its socket backs up
                     await asyncio.sleep(wait_s)
                 if len(frame) >= LARGE_FRAME_BYTES:  # handled between ticks, not across one
-                    await self._host.before_tick_room(len(frame) * HANDLING_S_PER_BYTE)
+                    await self._schedule.room(len(frame) * HANDLING_S_PER_BYTE)
                 started = time.perf_counter()
                 self._bridge.handle(self.session, frame)
                 self._handling.charge(time.perf_counter() - started)
@@ -358,6 +395,11 @@ def json_response(body: Any, status: http.HTTPStatus = http.HTTPStatus.OK) -> Re
     headers = Headers([("Content-Type", "application/json"),
                        ("Content-Length", str(len(data))), ("Cache-Control", "no-store")])
     return Response(status.value, status.phrase, headers, data)
+
+
+def _token(query: str) -> str | None:
+    """The ``token=`` of a WebSocket URL's query, if any."""
+    return parse_qs(query).get("token", [None])[0]
 
 
 def _peer(connection: ServerConnection) -> str:

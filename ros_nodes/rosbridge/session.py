@@ -8,14 +8,19 @@ it.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from ros_nodes.rosbridge.encoding import to_json
+from ros_nodes.rosbridge.errors import shorten
 from ros_nodes.rosbridge.limits import ClientLimits, TokenBucket
 from ros_nodes.rosbridge.outbox import Outbox
+from ros_nodes.rosbridge.schema import MAX_NAME_CHARS, STATUS_LEVELS, echoable_id
+
+log = logging.getLogger("websim.bridge")
 
 
 @dataclass
@@ -76,6 +81,40 @@ class Session:
     def reply(self, message: Mapping[str, Any]) -> None:
         """Queue a reply (JSON text)."""
         self.outbox.put_reply(to_json(message))
+
+    def report(self, reason: str, message: Any = None) -> None:
+        """Log an error and, if this client asked with set_level, send it as a status.
+
+        A reason longer than ``MAX_REASON_CHARS`` is cut: it may quote the client's input.
+        """
+        reason = shorten(reason)
+        log.warning("client %s: %s", self.peer, reason)
+        level = self.status_level
+        if level is not None and STATUS_LEVELS.index(level) <= STATUS_LEVELS.index("error"):
+            status: dict[str, Any] = {"op": "status", "level": "error", "msg": reason}
+            call_id = echoable_id(message)
+            if call_id is not None:
+                status["id"] = call_id
+            self.reply(status)
+
+    def fail_call(self, call_id: Any, service: str, reason: str) -> None:
+        """Answer a call with ``result: false`` and the reason in ``values``."""
+        response: dict[str, Any] = {"op": "service_response", "service": service,
+                                    "values": reason, "result": False}
+        if call_id is not None:
+            response["id"] = call_id
+        self.reply(response)
+
+    def refuse(self, reason: str, message: Any) -> None:
+        """Refuse an operation: report it, and answer a ``call_service`` as failed.
+
+        The answer makes the caller's callback run (roslib waits for it otherwise).
+        """
+        if isinstance(message, dict) and message.get("op") == "call_service" \
+                and isinstance(message.get("service"), str):
+            self.fail_call(echoable_id(message), message["service"][:MAX_NAME_CHARS],
+                           shorten(reason))
+        self.report(reason, message)
 
     def __repr__(self) -> str:
         return f"Session({self.peer}{', admin' if self.is_admin else ''})"

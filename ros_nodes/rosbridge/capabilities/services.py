@@ -74,11 +74,7 @@ class Services:
 
     def fail(self, session: Session, call_id: Any, service: str, reason: str) -> None:
         """Answer a call with ``result: false`` and the reason in ``values``."""
-        response: dict[str, Any] = {"op": "service_response", "service": service,
-                                    "values": reason, "result": False}
-        if call_id is not None:
-            response["id"] = call_id
-        session.reply(response)
+        session.fail_call(call_id, service, reason)
 
     def disconnect(self, session: Session) -> None:
         """Withdraw ``session``'s services and calls; fail the calls it was answering."""
