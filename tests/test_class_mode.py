@@ -25,7 +25,13 @@ import pytest
 import websockets
 
 from physics import ConfigError, Simulation, load_world
-from ros_nodes.rosbridge.classroom import Classroom, Student, numbered_roster, read_roster
+from ros_nodes.rosbridge.classroom import (
+    Classroom,
+    Student,
+    derived_token,
+    numbered_roster,
+    read_roster,
+)
 from ros_nodes.rosbridge.robot_host import RobotHost
 from ros_nodes.rosbridge.session import Session
 from ros_nodes.virtual_robot_core import VirtualRobot
@@ -405,3 +411,11 @@ def test_the_root_without_the_instructor_token_is_refused(server: ServerProcess)
 def test_students_cannot_ask_for_status_or_pause(server: ServerProcess) -> None:
     reply = asyncio.run(call(robot_url(server, "alice"), "/websim/status", {}))
     assert reply["result"] is False and "needs admin rights" in reply["values"]
+
+
+def test_robot_tokens_derive_from_the_instructor_token(server: ServerProcess,
+                                                      links: Path) -> None:
+    rows = {row["name"]: row["token"] for row in csv.DictReader(links.open())}
+    assert rows["alice"] == derived_token(ADMIN_TOKEN, "alice")  # stable across restarts
+    assert rows["alice"] != derived_token(ADMIN_TOKEN, "bob") != derived_token("other", "alice")
+    assert rows["carol"] == CAROL_TOKEN  # the roster's own token wins

@@ -21,6 +21,7 @@ from ros_nodes.rosbridge.class_server import ClassServer
 from ros_nodes.rosbridge.classroom import (
     Classroom,
     Student,
+    derived_token,
     numbered_roster,
     read_roster,
 )
@@ -92,7 +93,8 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
     """
     classroom = Classroom(class_roster(args.class_spec), make_robot,
                           open_class=args.open_class, max_robots=args.max_robots,
-                          idle_pause_s=args.idle_pause)
+                          idle_pause_s=args.idle_pause,
+                          make_token=lambda name: derived_token(token, name))
     site = Site(ClassServer(classroom, token, limits=limits, origins=origins),
                 hosts=classroom.get, ws_port=args.ws_port)
     names = [name for name, _ in classroom]

@@ -12,6 +12,8 @@ starts a comment.
 
 from __future__ import annotations
 
+import base64
+import hashlib
 import hmac
 import re
 import secrets
@@ -94,6 +96,17 @@ def read_roster(path: str | Path) -> list[Student]:
     return students
 
 
+def derived_token(secret: str, name: str) -> str:
+    """Robot ``name``'s token derived from the instructor's ``secret`` (HMAC-SHA256).
+
+    The same secret gives the same tokens after a restart (the links file stays valid) and
+    on every process of a class; a student's token says nothing of the secret or of other
+    robots' tokens.
+    """
+    digest = hmac.new(secret.encode(), f"websim robot {name}".encode(), hashlib.sha256)
+    return base64.urlsafe_b64encode(digest.digest()[:TOKEN_BYTES]).decode()
+
+
 def numbered_roster(count: int) -> list[Student]:
     """``robot01`` ... ``robotNN`` (at least two digits)."""
     if not 1 <= count <= DEFAULT_MAX_ROBOTS * 10:
@@ -113,21 +126,20 @@ class Classroom:
         open_class: enrol unknown names on their first connection.
         max_robots: most robots an open class holds.
         idle_pause_s: a robot nobody has been connected to for this long pauses.
-        make_token: makes a robot's token when the roster gives none.
+        make_token: makes robot NAME's token when the roster gives none (default: random).
     """
 
     def __init__(self, roster: list[Student], make_robot: Callable[[Student], VirtualRobot],
                  schedule: Schedule | None = None, *, open_class: bool = False,
                  max_robots: int = DEFAULT_MAX_ROBOTS,
                  idle_pause_s: float | None = DEFAULT_IDLE_PAUSE_S,
-                 make_token: Callable[[], str] = lambda: secrets.token_urlsafe(TOKEN_BYTES)
-                 ) -> None:
+                 make_token: Callable[[str], str] | None = None) -> None:
         self.schedule = schedule or Schedule()
         self.open_class = open_class
         self.max_robots = max(max_robots, len(roster))
         self._make_robot = make_robot
         self._idle_pause_s = idle_pause_s
-        self._make_token = make_token
+        self._make_token = make_token or (lambda name: secrets.token_urlsafe(TOKEN_BYTES))
         self._hosts: dict[str, RobotHost] = {}
         self._tokens: dict[str, str] = {}
         self.students: dict[str, Student] = {}
@@ -137,7 +149,7 @@ class Classroom:
     def _enrol(self, student: Student) -> RobotHost:
         host = RobotHost(self._make_robot(student), self.schedule, self._idle_pause_s)
         self._hosts[student.name] = host
-        self._tokens[student.name] = student.token or self._make_token()
+        self._tokens[student.name] = student.token or self._make_token(student.name)
         self.students[student.name] = student
         return host
 
