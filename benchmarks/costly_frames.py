@@ -62,7 +62,7 @@ from websockets.frames import Close
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_server import Server, cpu_seconds
-from nonreaders import HEALTHY_HZ_TARGET, OdomCounter, health, run_against_server
+from nonreaders import HEALTHY_HZ_TARGET, health, run_against_server, start_healthy
 
 MAX_FRAME_BYTES = 1 << 20
 """The server's default ``--max-frame-bytes``: every frame is at most this long."""
@@ -218,14 +218,7 @@ async def phase(server: Server, kind: str, attackers: int, seconds: float,
                 pace: bool) -> dict[str, Any]:
     """Healthy client, K attackers of ``kind`` in a child process, samples; the figures."""
     process = psutil.Process(server.process.pid)
-    healthy = OdomCounter(server.ws_url)
-    reader = asyncio.create_task(healthy.run(time.monotonic() + seconds + 60.0))
-    deadline = time.monotonic() + 10.0
-    while not healthy.received_s:
-        if time.monotonic() > deadline:
-            raise RuntimeError("the healthy client received no /odom within 10 s")
-        await asyncio.sleep(0.05)
-    await asyncio.sleep(1.0)
+    healthy, reader = await start_healthy(server, seconds + 60.0)
 
     context = multiprocessing.get_context("spawn")
     results: multiprocessing.Queue[dict[str, Any]] = context.Queue()

@@ -254,14 +254,7 @@ async def health(server: Server) -> dict[str, Any] | None:
 async def attack(server: Server, n_clients: int, seconds: float) -> dict[str, Any]:
     """Run the healthy client and N attackers for ``seconds``; the figures as a dict."""
     process = psutil.Process(server.process.pid)
-    healthy = OdomCounter(server.ws_url)
-    reader = asyncio.create_task(healthy.run(time.monotonic() + seconds + DRAIN_S + 20.0))
-    deadline = time.monotonic() + 10.0
-    while not healthy.received_s:
-        if time.monotonic() > deadline:
-            raise RuntimeError("the healthy client received no /odom within 10 s")
-        await asyncio.sleep(0.05)
-    await asyncio.sleep(1.0)
+    healthy, reader = await start_healthy(server, seconds + DRAIN_S + 20.0)
     rss_start = process.memory_info().rss
     cpu_start = cpu_seconds(process)
 
@@ -442,6 +435,20 @@ def main(argv: list[str] | None = None) -> int:
                              args.seconds + 60.0)
     print(json.dumps(row) if args.json else report(row), flush=True)
     return 0
+
+
+async def start_healthy(server: Server,
+                        run_s: float) -> tuple[OdomCounter, asyncio.Task[None]]:
+    """A healthy /odom listener for ``run_s``, once it has received for a second."""
+    healthy = OdomCounter(server.ws_url)
+    reader = asyncio.create_task(healthy.run(time.monotonic() + run_s))
+    deadline = time.monotonic() + 10.0
+    while not healthy.received_s:
+        if time.monotonic() > deadline:
+            raise RuntimeError("the healthy client received no /odom within 10 s")
+        await asyncio.sleep(0.05)
+    await asyncio.sleep(1.0)
+    return healthy, reader
 
 
 def run_against_server(attack_on: Callable[[Any], Awaitable[dict[str, Any]]],
