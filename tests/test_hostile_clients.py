@@ -9,6 +9,7 @@ with a margin for a loaded 2-core machine).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import time
 from collections.abc import Iterator
@@ -329,3 +330,27 @@ def test_connections_beyond_max_clients_are_refused_with_503() -> None:
         asyncio.run(drive_and_check(server))  # room again
     finally:
         server.stop()
+
+
+def test_publications_relayed_beyond_the_relay_budget_are_dropped(server: ServerProcess) -> None:
+    chunk = {"op": "publish", "topic": "/essay", "msg": {"data": "x" * (200 << 10)}}
+
+    async def flood() -> tuple[int, list[dict[str, Any]]]:
+        async with websockets.connect(server.ws_url, max_size=None) as reader:
+            await reader.send(json.dumps({"op": "subscribe", "topic": "/essay"}))
+            await asyncio.sleep(0.2)
+            statuses = await errors_for(server.ws_url, [
+                {"op": "advertise", "topic": "/essay", "type": "std_msgs/String"},
+                *[chunk] * 8], expect=2)
+            received = 0
+            with contextlib.suppress(TimeoutError):
+                while True:
+                    await asyncio.wait_for(reader.recv(), 1.0)
+                    received += 1
+            return received, statuses
+
+    received, statuses = asyncio.run(flood())
+    assert all(f"more than {LIMITS.relay_bytes_per_s} bytes/s published; message dropped"
+               in s["msg"] for s in statuses)
+    burst = max(LIMITS.relay_bytes_per_s, LIMITS.max_frame_bytes) // len(json.dumps(chunk))
+    assert 1 <= received <= burst + 1, "the burst passes, the rest is dropped"

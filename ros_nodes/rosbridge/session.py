@@ -75,8 +75,9 @@ class Session:
         self.frame_bytes = 0
         """Size of the frame being handled (what a publish costs the relay budget)."""
         budget_args = () if clock is None else (clock,)
-        self.relay_budget = TokenBucket(self.limits.relay_bytes_per_s,
-                                        self.limits.relay_bytes_per_s, *budget_args)
+        self.relay_budget = TokenBucket(  # a burst holds one message of the largest size
+            self.limits.relay_bytes_per_s,
+            max(self.limits.relay_bytes_per_s, self.limits.max_frame_bytes), *budget_args)
 
     def reply(self, message: Mapping[str, Any]) -> None:
         """Queue a reply (JSON text)."""
