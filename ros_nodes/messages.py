@@ -56,6 +56,27 @@ def normalize_service_type(type_name: str) -> str:
     return normalize_type(type_name)
 
 
+def prefixed_frames(msg: Message, prefix: str) -> Message:
+    """A copy of a robot message with ``prefix`` before every frame id it names.
+
+    Covers what the robot publishes: ``header.frame_id``, ``child_frame_id``, the transforms
+    of a ``TFMessage`` and the markers of a ``MarkerArray`` (``alice/`` + ``odom``).
+    """
+    def renamed(item: Any) -> Any:
+        if isinstance(item, dict):
+            out = {key: renamed(value) for key, value in item.items()}
+            for key in ("frame_id", "child_frame_id"):
+                if isinstance(out.get(key), str) and out[key]:
+                    out[key] = prefix + out[key]
+            return out
+        if isinstance(item, list) and item and isinstance(item[0], dict):
+            return [renamed(value) for value in item]
+        return item
+
+    result: Message = renamed(msg)
+    return result
+
+
 def stamp(time_s: float) -> Message:
     """``builtin_interfaces/Time`` for a time in seconds (e.g. ``time.time()``)."""
     sec = math.floor(time_s)

@@ -229,6 +229,18 @@ class GraphRelay:
             raise BridgeError(f"publish {topic}: {error}") from None
 
 
+def spin_until_shutdown(executor: SingleThreadedExecutor, context: Context) -> None:
+    """Spin ``executor`` until its context shuts down (the executor thread's body)."""
+    try:
+        executor.spin()
+    except ExternalShutdownException:
+        pass
+    except RuntimeError:
+        if context.ok():
+            raise
+        # rclpy can fail taking a message whose entity the shutdown destroyed mid-take.
+
+
 class RosRuntime:
     """rclpy inside ``websim serve``: a context, the two nodes and the executor thread.
 
@@ -270,14 +282,11 @@ class RosRuntime:
         self._bridge.graph.attach(self.relay)
 
     def _spin(self) -> None:
-        try:
-            self.executor.spin()
-        except ExternalShutdownException:
-            pass
-        except RuntimeError:
-            if self.context.ok():
-                raise
-            # rclpy can fail taking a message whose entity the shutdown destroyed mid-take.
+        spin_until_shutdown(self.executor, self.context)
+
+    def poll(self) -> None:
+        """Let subscriptions to graph topics nobody publishes yet start (``relay.poll``)."""
+        self.relay.poll()
 
     def stop(self, timeout_s: float = 5.0) -> None:
         """Detach from the bridge, stop the executor and destroy the nodes."""
@@ -285,5 +294,59 @@ class RosRuntime:
         self.executor.shutdown(timeout_sec=timeout_s)
         self.robot_node.destroy_node()
         self.relay_node.destroy_node()
+        self.context.try_shutdown()
+        self._thread.join(timeout_s)
+
+
+class ClassRosRuntime:
+    """rclpy inside ``websim serve --class --ros``: a ``virtual_robot`` node per robot.
+
+    Robot NAME's node is ``/NAME/virtual_robot``, its topics and services under ``/NAME``
+    (``/alice/cmd_vel``, ``/alice/odom``, ``/alice/reset_simulation``) and its frames
+    prefixed (``alice/odom``, ``alice/base_link``, ``alice/laser``), as multi-robot ROS 2
+    stacks name them, so a student's node runs with ``--ros-args -r __ns:=/alice``. The
+    browsers' rosbridge topics are not relayed to the graph in a class (each robot's page
+    talks to its bridge; the graph talks to its node).
+
+    Args:
+        robots: (name, robot) of every robot of the class.
+        loop: the server's event loop.
+    """
+
+    def __init__(self, robots: list[tuple[str, VirtualRobot]],
+                 loop: asyncio.AbstractEventLoop) -> None:
+        self.context = Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.nodes: list[VirtualRobotNode] = []
+        try:
+            for name, robot in robots:
+                self.nodes.append(VirtualRobotNode(
+                    robot, access=LoopAccess(loop), own_timer=False, frame_prefix=f"{name}/",
+                    namespace=f"/{name}", context=self.context))
+        except BaseException:
+            for node in self.nodes:
+                node.destroy_node()
+            self.context.try_shutdown()
+            raise
+        self.executor = SingleThreadedExecutor(context=self.context)
+        for node in self.nodes:
+            self.executor.add_node(node)
+        self._thread = threading.Thread(target=self._spin, name="rclpy-executor", daemon=True)
+
+    def start(self) -> None:
+        """Spin the executor."""
+        self._thread.start()
+
+    def poll(self) -> None:
+        """Nothing waits for graph topics here (no relay in a class)."""
+
+    def _spin(self) -> None:
+        spin_until_shutdown(self.executor, self.context)
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Stop the executor and destroy the nodes."""
+        self.executor.shutdown(timeout_sec=timeout_s)
+        for node in self.nodes:
+            node.destroy_node()
         self.context.try_shutdown()
         self._thread.join(timeout_s)

@@ -56,7 +56,7 @@ except ImportError as error:  # pragma: no cover - depends on the installation
 
 from physics import ConfigError, NoiseParams, Simulation, load_params, load_world
 from physics.params import SHIPPED_PARAMS_FILE
-from ros_nodes.messages import stamp
+from ros_nodes.messages import prefixed_frames, stamp
 from ros_nodes.node_parameters import add_parameter_callbacks
 from ros_nodes.parameters import (
     PARAMETER_DOUBLE,
@@ -73,7 +73,7 @@ from ros_nodes.ros_interop import (
     to_dict,
     to_message,
 )
-from ros_nodes.topics import CMD_VEL, PUBLISHED_TOPICS, TopicSpec
+from ros_nodes.topics import CMD_VEL, PUBLISHED_TOPICS, RESET_SERVICE, TopicSpec
 from ros_nodes.virtual_robot_core import Publication, VirtualRobot
 
 NODE_NAME = "virtual_robot"
@@ -107,6 +107,11 @@ class DirectAccess:
     def post(self, fn: Callable[[], None]) -> None:
         """Run ``fn`` now."""
         fn()
+
+
+def relative(name: str) -> str:
+    """A robot topic or service name relative to the node's namespace (``/odom`` -> ``odom``)."""
+    return name.lstrip("/")
 
 
 def qos_profile(spec: TopicSpec) -> QoSProfile:
@@ -170,6 +175,10 @@ class VirtualRobotNode(Node):
             ticks it and the node publishes every tick's messages (``VirtualRobot.listeners``).
         ignore_cmd_vel_from: a node whose /cmd_vel messages are ignored (the in-process
             rosbridge relay, whose commands the robot already got).
+        frame_prefix: prefixed to every frame id the node publishes (``alice/`` gives
+            ``alice/odom``, ``alice/base_link``: the multi-robot convention); the robot's
+            topics and services are relative names, so ``namespace="/alice"`` in
+            ``node_kwargs`` puts them under ``/alice``.
         **node_kwargs: passed to ``rclpy.node.Node`` (e.g. ``context``).
 
     Raises:
@@ -178,8 +187,9 @@ class VirtualRobotNode(Node):
 
     def __init__(self, robot: VirtualRobot | None = None, *, access: RobotAccess | None = None,
                  own_timer: bool = True, ignore_cmd_vel_from: str | None = None,
-                 **node_kwargs: Any) -> None:
+                 frame_prefix: str = "", **node_kwargs: Any) -> None:
         super().__init__(NODE_NAME, **node_kwargs)
+        self._frame_prefix = frame_prefix
         self._access: RobotAccess = access or DirectAccess()
         self._ticks = 0
         self._robot: VirtualRobot | None = None
@@ -203,7 +213,7 @@ class VirtualRobotNode(Node):
                 raise
             self._classes[spec.name] = cls
             self._robot_publishers[spec.name] = self.create_publisher(
-                cls, spec.name, qos_profile(spec))
+                cls, relative(spec.name), qos_profile(spec))
         if not any(name in self._robot_publishers for name in ("/tf", "/tf_static")):
             self.get_logger().warning(TF_MISSING_WARNING)
         self._clock_publisher = (self.create_publisher(ClockMsg, "/clock", 10)
@@ -220,9 +230,9 @@ class VirtualRobotNode(Node):
                     self._on_cmd_vel(msg)
 
             callback = unless_relayed
-        self.create_subscription(message_class(cmd_vel_type), CMD_VEL.name, callback,
+        self.create_subscription(message_class(cmd_vel_type), relative(CMD_VEL.name), callback,
                                  qos_profile(CMD_VEL))
-        self.create_service(Empty, "/reset_simulation", self._on_reset)
+        self.create_service(Empty, relative(RESET_SERVICE), self._on_reset)
 
         self.robot.parameters.listeners.append(self._on_robot_parameters_changed)
         if own_timer:
@@ -343,6 +353,8 @@ class VirtualRobotNode(Node):
         for spec, msg in publications:
             publisher = self._robot_publishers.get(spec.name)
             if publisher is not None:
+                if self._frame_prefix:
+                    msg = prefixed_frames(msg, self._frame_prefix)
                 publisher.publish(to_message(self._classes[spec.name], msg, strict=False))
 
     def _on_cmd_vel(self, msg: Any) -> None:

@@ -11,6 +11,7 @@ import importlib.util
 import itertools
 import statistics
 import subprocess
+import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -394,3 +395,42 @@ def test_serve_ros_relays_graph_topics_both_ways(
     wait_for(lambda: any(m["data"] == "c" for m in in_browser), 10.0, "rclpy's message")
     assert [m["data"] for m in in_browser] == ["a", "b", "c"]
     assert "/chatter" in browser.get_topics()
+
+
+# ---- websim serve --class --ros --------------------------------------------------------------
+
+STUDENT = Path(__file__).resolve().parent / "ros_students" / "drive.py"
+
+
+def test_class_ros_namespaced_students_drive_their_own_robots(graph: Graph,
+                                                              domain: int) -> None:
+    server = start_server(["--class", "2", "--ros"])
+    try:
+        for name in ("robot01", "robot02"):
+            graph.spin_until(lambda n=name: graph.node.count_publishers(f"/{n}/odom") > 0,
+                             STARTUP_TIMEOUT_S, f"the /{name}/virtual_robot node")
+        odoms = {name: graph.collect(Odometry, f"/{name}/odom", RELIABLE)
+                 for name in ("robot01", "robot02")}
+        students = [subprocess.Popen([sys.executable, str(STUDENT), str(speed), "1.5",
+                                      "--ros-args", "-r", f"__ns:=/{name}"],
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     text=True)
+                    for name, speed in (("robot01", 0.2), ("robot02", 0.4))]
+        graph.spin_until(lambda: all(student.poll() is not None for student in students),
+                         STARTUP_TIMEOUT_S + 10, "the students' nodes to finish")
+        for student in students:
+            out, _ = student.communicate()
+            assert student.returncode == 0, out
+        graph.spin_until(lambda: all(odoms.values()), 5.0, "both robots' odometry")
+        first = {name: odoms[name][-1][1] for name in odoms}
+        assert first["robot01"].header.frame_id == "robot01/odom"
+        assert first["robot01"].child_frame_id == "robot01/base_link"
+        top = {name: max(m.twist.twist.linear.x for _, m in odoms[name]) for name in odoms}
+        assert top["robot01"] == pytest.approx(0.2) and top["robot02"] == pytest.approx(0.4)
+        x = {name: first[name].pose.pose.position.x for name in first}
+        assert x["robot02"] > 1.5 * x["robot01"] > 0.2, "each drove its own robot"
+        scans = graph.collect(LaserScan, "/robot01/scan", qos_profile_sensor_data)
+        graph.spin_until(lambda: scans, 5.0, "robot01's /scan on the graph")
+        assert scans[-1][1].header.frame_id == "robot01/laser"
+    finally:
+        assert server.stop() == 0, "".join(server.output)

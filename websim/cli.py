@@ -107,9 +107,6 @@ def _run_serve(args: argparse.Namespace) -> int:
     if args.class_spec is None:
         site = sites.single_robot(VirtualRobot(make_simulation(args)), token, limits, origins)
         return serve_command.run(args, site, token)
-    if args.ros:
-        raise ConfigError("--class with --ros is not supported yet: run the class without "
-                          "--ros, or one robot with --ros")
 
     def make_robot(student: Student) -> VirtualRobot:
         world = args.world if student.world is None else student.world

@@ -16,18 +16,14 @@ import signal
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from physics.params import PROJECT_DIR
 from ros_nodes.rosbridge.classroom import DEFAULT_IDLE_PAUSE_S, DEFAULT_MAX_ROBOTS
 from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy
 from ros_nodes.rosbridge.server import SimServer, start_websocket
-from ros_nodes.virtual_robot_core import VirtualRobot
 from websim.http_server import start_http
 from websim.sites import Site
-
-if TYPE_CHECKING:  # rclpy is imported only with --ros
-    from ros_nodes.ros_graph import RosRuntime
 
 WEB_DIR = PROJECT_DIR / "web-interface"
 """The static frontend."""
@@ -140,10 +136,10 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
 
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
-    ros = None
-    if args.ros and robot is not None and isinstance(server, SimServer):
+    ros: RosGraph | None = None
+    if args.ros:
         try:
-            ros = _start_ros(robot, server, loop)
+            ros = _start_ros(site, loop)
         except RuntimeError as error:
             print(f"websim: error: {error}", file=sys.stderr)
             websocket.close()
@@ -170,8 +166,14 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     for line in site.banner:
         print(f"  {line}", flush=True)
     if ros is not None:
-        print(f"  ROS 2:     node /virtual_robot and relay /rosbridge_websocket on "
-              f"ROS_DOMAIN_ID {os.environ.get('ROS_DOMAIN_ID', '0')}", flush=True)
+        domain = os.environ.get("ROS_DOMAIN_ID", "0")
+        if robot is not None:
+            print(f"  ROS 2:     node /virtual_robot and relay /rosbridge_websocket on "
+                  f"ROS_DOMAIN_ID {domain}", flush=True)
+        else:
+            print(f"  ROS 2:     node /NAME/virtual_robot per robot, topics under /NAME, "
+                  f"frames NAME/odom, NAME/base_link, NAME/laser, on ROS_DOMAIN_ID {domain}",
+                  flush=True)
     if args.host in ("0.0.0.0", "::"):
         print("  listening on every network interface: anyone who can reach this machine can "
               "drive the robot; only the admin token can change its parameters", flush=True)
@@ -196,24 +198,44 @@ GRAPH_POLL_PERIOD_S = 0.5
 """How often subscriptions waiting for a topic to appear on the ROS graph look again."""
 
 
-def _start_ros(robot: VirtualRobot, server: SimServer,
-               loop: asyncio.AbstractEventLoop) -> RosRuntime:
-    """Start rclpy in-process (``--ros``); RuntimeError with the reason if it cannot."""
+class RosGraph(Protocol):
+    """rclpy running inside ``websim serve`` (``RosRuntime`` or ``ClassRosRuntime``)."""
+
+    def poll(self) -> None:
+        """Look again for graph topics that subscriptions wait for."""
+
+    def stop(self) -> None:
+        """Stop rclpy and destroy the nodes."""
+
+
+def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
+    """Start rclpy in-process (``--ros``); RuntimeError with the reason if it cannot.
+
+    One robot: its node and the relay of its bridge to the graph. A class: a namespaced node
+    per robot of the roster, whose LiDAR is then cast on every scan tick.
+    """
     try:
-        from ros_nodes.ros_graph import RosRuntime
+        from ros_nodes.ros_graph import ClassRosRuntime, RosRuntime
     except ImportError as error:
         raise RuntimeError(f"--ros needs ROS 2's rclpy: {error} (pip install '.[ros]', "
                            "or source a ROS 2 installation)") from None
-    runtime = RosRuntime(robot, server.bridge, loop)
+    runtime: RosRuntime | ClassRosRuntime
+    if site.robot is not None and isinstance(site.front, SimServer):
+        runtime = RosRuntime(site.robot, site.front.bridge, loop)
+    else:
+        hosts = site.class_hosts()
+        for _, host in hosts:
+            host.always_scan = True
+        runtime = ClassRosRuntime([(name, host.robot) for name, host in hosts], loop)
     runtime.start()
     return runtime
 
 
-async def _poll_graph(ros: RosRuntime) -> None:
+async def _poll_graph(ros: RosGraph) -> None:
     """Let subscriptions to topics nobody publishes yet start when a publisher appears."""
     while True:
         await asyncio.sleep(GRAPH_POLL_PERIOD_S)
-        ros.relay.poll()
+        ros.poll()
 
 
 def _port_error(what: str, host: str, port: int, error: OSError) -> int:

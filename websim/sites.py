@@ -48,6 +48,11 @@ class Site:
     robot: VirtualRobot | None = None
     hosts: Callable[[str], RobotHost | None] | None = None
     ws_port: int = 9090
+    classroom: Classroom | None = None
+
+    def class_hosts(self) -> list[tuple[str, RobotHost]]:
+        """The robots of a class, by name (none for a single robot)."""
+        return [] if self.classroom is None else list(self.classroom)
 
     def has_robot(self, name: str) -> bool:
         """Whether ``/robots/NAME/`` is a robot's page (an open class enrols NAME)."""
@@ -96,7 +101,7 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
                           idle_pause_s=args.idle_pause,
                           make_token=lambda name: derived_token(token, name))
     site = Site(ClassServer(classroom, token, limits=limits, origins=origins),
-                hosts=classroom.get, ws_port=args.ws_port)
+                hosts=classroom.get, ws_port=args.ws_port, classroom=classroom)
     names = [name for name, _ in classroom]
     site.banner.append(f"class:     {len(names)} robots ({names[0]} ... {names[-1]}), each at "
                        f"{ROBOTS_PREFIX}NAME/ on both ports"

@@ -168,6 +168,8 @@ class RobotHost:
         self.schedule = schedule or Schedule()
         self.held = False
         """Paused by an admin (``/websim/pause``), whoever is connected."""
+        self.always_scan = False
+        """Cast the LiDAR whether or not a client subscribes (a ROS node publishes it)."""
         self._idle_pause_s = idle_pause_s
         self._clock = clock
         self._last_client_s = clock()
@@ -214,7 +216,8 @@ class RobotHost:
             self.faults.record("expiring service calls", error)
 
     def _step(self) -> list[Publication]:
-        wants_scan = self.bridge.topics.has_subscribers(SCAN.name) or self.bridge.graph.attached
+        wants_scan = self.always_scan or self.bridge.graph.attached or \
+            self.bridge.topics.has_subscribers(SCAN.name)
         try:
             publications = self.robot.step(scan=wants_scan)
         except Exception as error:  # the robot's boundary: record, recover, go on
