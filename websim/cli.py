@@ -13,7 +13,7 @@ from physics.world import WORLDS_DIR
 from ros_nodes.robot_description import robot_json
 from ros_nodes.rosbridge.classroom import Student
 from ros_nodes.virtual_robot_core import VirtualRobot
-from websim import compare_command, sites
+from websim import compare_command, nginx_config, sites
 from websim import serve as serve_command
 
 DEFAULT_WORLD = str(WORLDS_DIR / "empty.yaml")
@@ -50,6 +50,14 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sim_arguments(compare, mode=False)
     compare_command.add_arguments(compare)
     compare.set_defaults(run=compare_command.run)
+
+    proxy = commands.add_parser(
+        "nginx-config", help="print an nginx.conf routing a class's robots to its workers",
+        description="Print an nginx configuration that routes /robots/NAME (pages and "
+                    "WebSockets) to 'websim serve --class ROSTER --worker' processes with "
+                    "hash $robot consistent: the same name always reaches the same worker.")
+    nginx_config.add_arguments(proxy)
+    proxy.set_defaults(run=nginx_config.run)
 
     describe = commands.add_parser(
         "robot-json", help="print the robot.json the web page reads (limits, topics, params)",
@@ -113,8 +121,9 @@ def _run_serve(args: argparse.Namespace) -> int:
         return VirtualRobot(make_simulation(argparse.Namespace(**{**vars(args),
                                                                  "world": world})))
 
-    return serve_command.run(args, sites.classroom_site(args, make_robot, token, limits,
-                                                        origins), token)
+    platform = load_params(args.params)
+    return serve_command.run(args, sites.classroom_site(
+        args, make_robot, (platform.robot, platform.lidar), token, limits, origins), token)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -83,6 +83,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--links", default=None, metavar="FILE",
                         help="with --class: write a CSV of every robot's page, admin page "
                              "with its token, WebSocket URL and token, to hand out")
+    parser.add_argument("--worker", action="store_true",
+                        help="with --class: one of several processes behind nginx (websim "
+                             "nginx-config): a robot is made when first routed here")
+    parser.add_argument("--public-ws-port", type=int, default=None, metavar="PORT",
+                        help="the WebSocket port students reach (a proxy's) for the pages' "
+                             "config.json and the links file (default --ws-port)")
+    parser.add_argument("--public-http-port", type=int, default=None, metavar="PORT",
+                        help="the page port students reach (a proxy's), for the links file "
+                             "(default --http-port)")
     parser.add_argument("--ros", action="store_true",
                         help="also run the virtual_robot node on the ROS 2 graph and relay "
                              "rosbridge topics to it (needs rclpy: pip install '.[ros]')")

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from physics import ConfigError
+from physics import ConfigError, LidarParams, RobotParams
 from ros_nodes.robot_description import robot_json
 from ros_nodes.rosbridge.class_server import ClassServer
 from ros_nodes.rosbridge.classroom import (
@@ -39,35 +39,41 @@ class Site:
         front: the WebSocket front.
         banner: lines the banner prints after the URLs.
         robot: the single robot (None for a class).
-        hosts: finds a class's robot by name (None for a single robot).
-        ws_port: the WebSocket port, for the ``config.json`` a class's pages read.
+        ws_port: the WebSocket port the class's pages are told (``config.json``): the
+            server's own, or a proxy's (``--public-ws-port``).
+        classroom: the class (None for a single robot).
+        new_robot_json: ``robot.json`` of a class robot not created yet.
     """
 
     front: WebSocketFront
     banner: list[str] = field(default_factory=list)
     robot: VirtualRobot | None = None
-    hosts: Callable[[str], RobotHost | None] | None = None
     ws_port: int = 9090
     classroom: Classroom | None = None
+    new_robot_json: str | None = None
 
     def class_hosts(self) -> list[tuple[str, RobotHost]]:
         """The robots of a class, by name (none for a single robot)."""
         return [] if self.classroom is None else list(self.classroom)
 
     def has_robot(self, name: str) -> bool:
-        """Whether ``/robots/NAME/`` is a robot's page (an open class enrols NAME)."""
-        return self.hosts is not None and self.hosts(name) is not None
+        """Whether ``/robots/NAME/`` is a robot's page (pages create no robot)."""
+        return self.classroom is not None and self.classroom.knows(name)
 
     def document(self, robot: str | None, name: str, hostname: str) -> str | None:
-        """The live ``robot.json`` of a robot, and a class robot's ``config.json``."""
+        """The live ``robot.json`` of a robot, and a class robot's ``config.json``.
+
+        A class robot not hosted here (yet) is described as a new robot would be: behind a
+        proxy the page and the WebSocket of one robot may be served by different workers.
+        """
         if robot is None:
             if name == "robot.json" and self.robot is not None:
                 return robot_json(self.robot.sim.params, self.robot.sim.lidar.params)
             return None
-        host = self.hosts(robot) if self.hosts is not None else None
-        if host is None:
-            return None
         if name == "robot.json":
+            host = dict(self.class_hosts()).get(robot)
+            if host is None:
+                return self.new_robot_json
             return robot_json(host.robot.sim.params, host.robot.sim.lidar.params)
         url = f"ws://{_url_name(hostname)}:{self.ws_port}{ROBOTS_PREFIX}{robot}"
         return json.dumps({"about": f"robot {robot} of this class, filled by websim serve",
@@ -88,7 +94,8 @@ def class_roster(spec: str) -> list[Student]:
 
 
 def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], VirtualRobot],
-                   token: str, limits: ClientLimits, origins: OriginPolicy) -> Site:
+                   new_robot_params: tuple[RobotParams, LidarParams], token: str,
+                   limits: ClientLimits, origins: OriginPolicy) -> Site:
     """A class: robot NAME at ``ws://HOST:9090/robots/NAME``, its page at ``/robots/NAME/``.
 
     Writes the links file when ``--links`` asks for one.
@@ -99,16 +106,20 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
     classroom = Classroom(class_roster(args.class_spec), make_robot,
                           open_class=args.open_class, max_robots=args.max_robots,
                           idle_pause_s=args.idle_pause,
-                          make_token=lambda name: derived_token(token, name))
+                          make_token=lambda name: derived_token(token, name),
+                          lazy=args.worker)
     site = Site(ClassServer(classroom, token, limits=limits, origins=origins),
-                hosts=classroom.get, ws_port=args.ws_port, classroom=classroom)
-    names = [name for name, _ in classroom]
+                ws_port=args.public_ws_port or args.ws_port, classroom=classroom,
+                new_robot_json=robot_json(*new_robot_params))
+    names = list(classroom.students)
+    notes = [note for note, wanted in (("new names enrol (open class)", args.open_class),
+                                       ("a worker: a robot is made when first routed here",
+                                        args.worker)) if wanted]
     site.banner.append(f"class:     {len(names)} robots ({names[0]} ... {names[-1]}), each at "
-                       f"{ROBOTS_PREFIX}NAME/ on both ports"
-                       f"{'; new names enrol (open class)' if args.open_class else ''}")
+                       f"{ROBOTS_PREFIX}NAME/ on both ports" + "".join(f"; {n}" for n in notes))
     if args.links is not None:
-        write_links(Path(args.links), classroom, public_host(args.host), args.http_port,
-                    args.ws_port)
+        write_links(Path(args.links), classroom, public_host(args.host),
+                    args.public_http_port or args.http_port, site.ws_port)
         site.banner.append(f"links:     {args.links} (name, page, admin page with the robot's "
                            "token, WebSocket, token)")
     return site
@@ -133,7 +144,7 @@ def write_links(path: Path, classroom: Classroom, host: str, http_port: int,
         with path.open("w", newline="", encoding="utf-8") as stream:
             writer = csv.writer(stream)
             writer.writerow(["name", "page", "admin_page", "websocket", "token"])
-            for name, _ in classroom:
+            for name in classroom.students:
                 token = classroom.token(name)
                 page = f"http://{name_in_url}:{http_port}{ROBOTS_PREFIX}{name}/"
                 writer.writerow([name, page, f"{page}admin?token={token}",

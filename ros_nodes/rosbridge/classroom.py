@@ -127,13 +127,15 @@ class Classroom:
         max_robots: most robots an open class holds.
         idle_pause_s: a robot nobody has been connected to for this long pauses.
         make_token: makes robot NAME's token when the roster gives none (default: random).
+        lazy: create a robot on its first ``get`` rather than at start (a worker of a class
+            spread over several processes hosts only the robots routed to it).
     """
 
     def __init__(self, roster: list[Student], make_robot: Callable[[Student], VirtualRobot],
                  schedule: Schedule | None = None, *, open_class: bool = False,
                  max_robots: int = DEFAULT_MAX_ROBOTS,
                  idle_pause_s: float | None = DEFAULT_IDLE_PAUSE_S,
-                 make_token: Callable[[str], str] | None = None) -> None:
+                 make_token: Callable[[str], str] | None = None, lazy: bool = False) -> None:
         self.schedule = schedule or Schedule()
         self.open_class = open_class
         self.max_robots = max(max_robots, len(roster))
@@ -142,15 +144,16 @@ class Classroom:
         self._make_token = make_token or (lambda name: secrets.token_urlsafe(TOKEN_BYTES))
         self._hosts: dict[str, RobotHost] = {}
         self._tokens: dict[str, str] = {}
-        self.students: dict[str, Student] = {}
-        for student in roster:
-            self._enrol(student)
+        self.students: dict[str, Student] = {student.name: student for student in roster}
+        if not lazy:
+            for student in roster:
+                self._enrol(student)
 
     def _enrol(self, student: Student) -> RobotHost:
         host = RobotHost(self._make_robot(student), self.schedule, self._idle_pause_s)
         self._hosts[student.name] = host
-        self._tokens[student.name] = student.token or self._make_token(student.name)
         self.students[student.name] = student
+        self.token(student.name)
         return host
 
     def __iter__(self) -> Iterator[tuple[str, RobotHost]]:
@@ -159,25 +162,33 @@ class Classroom:
     def __len__(self) -> int:
         return len(self._hosts)
 
+    def knows(self, name: str) -> bool:
+        """Whether ``name`` is (or may become, in an open class) a robot here, creating none."""
+        return name in self.students or (self.open_class and ROBOT_NAME.fullmatch(name)
+                                         is not None)
+
     def get(self, name: str) -> RobotHost | None:
-        """The robot ``name``; in an open class a valid new name enrols (up to the limit).
+        """The robot ``name``, created now if it is not yet (lazily, or enrolling).
 
         None: no such robot (unknown, invalid, or the open class is full).
         """
         host = self._hosts.get(name)
-        if host is not None or not self.open_class or not ROBOT_NAME.fullmatch(name):
+        if host is not None or not self.knows(name):
             return host
-        if len(self._hosts) >= self.max_robots:
+        if name not in self.students and len(self._hosts) >= self.max_robots:
             return None
-        return self._enrol(Student(name))
+        return self._enrol(self.students.get(name, Student(name)))
 
     def token(self, name: str) -> str:
-        """Robot ``name``'s own admin token."""
+        """Robot ``name``'s own admin token (roster robots, created or not)."""
+        if name not in self._tokens:
+            student = self.students[name]
+            self._tokens[name] = student.token or self._make_token(name)
         return self._tokens[name]
 
     def is_robot_token(self, name: str, presented: str | None) -> bool:
         """Constant-time check of a token presented for robot ``name``."""
-        expected = self._tokens.get(name)
+        expected = self.token(name) if name in self.students else self._tokens.get(name)
         if not presented or expected is None:
             return False
         return hmac.compare_digest(presented.encode(), expected.encode())
