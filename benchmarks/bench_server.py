@@ -172,8 +172,11 @@ class Server:
 
 
 @contextlib.contextmanager
-def running_server(log_dir: Path) -> Iterator[Server]:
-    """Start ``websim serve`` on free ports, wait until healthy, and always stop it."""
+def running_server(log_dir: Path, extra_args: Sequence[str] = ()) -> Iterator[Server]:
+    """Start ``websim serve`` on free ports, wait until healthy, and always stop it.
+
+    ``extra_args`` are appended to its command line (e.g. ``--class 40``).
+    """
     ws_port = free_port()
     http_port = free_port()
     while http_port == ws_port:
@@ -181,7 +184,7 @@ def running_server(log_dir: Path) -> Iterator[Server]:
     log_path = log_dir / f"websim-serve-{ws_port}.log"
     command = [sys.executable, "-m", "websim.cli", "serve", "--world", "empty",
                "--host", HOST, "--ws-port", str(ws_port), "--http-port", str(http_port),
-               "--admin-token", ADMIN_TOKEN]
+               "--admin-token", ADMIN_TOKEN, *extra_args]
     env = {**os.environ, "PYTHONUNBUFFERED": "1",
            "PYTHONPATH": os.pathsep.join(filter(None, [str(PROJECT_DIR),
                                                        os.environ.get("PYTHONPATH")]))}
