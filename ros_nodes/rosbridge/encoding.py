@@ -1,9 +1,9 @@
 """Frames on the wire: JSON text (non-finite floats as null) and CBOR binary.
 
 roslibjs parses JSON with ``JSON.parse``, which throws on ``NaN`` and ``Infinity``, so every
-non-finite float goes out as ``null``, as rosbridge_server does (encoded by orjson). CBOR keeps floats as they are
-and packs ``float32[]`` fields (``Float32Sequence``) as RFC 8746 typed arrays (tag 85,
-little-endian), which roslibjs decodes into a ``Float32Array``.
+non-finite float goes out as ``null``, as rosbridge_server does (encoded by orjson). CBOR
+keeps floats as they are and packs ``float32[]`` fields (``Float32Sequence``) as RFC 8746
+typed arrays (tag 85, little-endian), which roslibjs decodes into a ``Float32Array``.
 """
 
 from __future__ import annotations
