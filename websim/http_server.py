@@ -45,7 +45,7 @@ from aiohttp.abc import AbstractAccessLogger
 
 log = logging.getLogger("websim.http")
 
-PAGE_ROUTES = {"/": "index.html", "/admin": "admin.html"}
+PAGE_ROUTES = {"/": "index.html", "/admin": "admin.html", "/class": "class.html"}
 """Clean URLs the course uses, mapped to files of the web folder."""
 
 TOP_LEVEL_FILES = ("*.html", "favicon.svg", "config.json")

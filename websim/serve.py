@@ -21,6 +21,7 @@ from typing import Protocol
 from physics.params import PROJECT_DIR
 from ros_nodes.rosbridge.classroom import DEFAULT_IDLE_PAUSE_S, DEFAULT_MAX_ROBOTS
 from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy
+from ros_nodes.rosbridge.schema import NAME_TOKEN
 from ros_nodes.rosbridge.server import SimServer, start_websocket
 from websim.http_server import start_http
 from websim.sites import Site
@@ -233,6 +234,10 @@ def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
         runtime = RosRuntime(site.robot, site.front.bridge, loop)
     else:
         hosts = site.class_hosts()
+        unnamable = [name for name, _ in hosts if not NAME_TOKEN.fullmatch(name)]
+        if unnamable:
+            raise RuntimeError(f"--ros: robot names must also be ROS namespaces (a letter or _ "
+                               f"first, no -): {', '.join(unnamable[:5])}")
         for _, host in hosts:
             host.always_scan = True
         runtime = ClassRosRuntime([(name, host.robot) for name, host in hosts], loop)

@@ -67,9 +67,14 @@ class Site:
         proxy the page and the WebSocket of one robot may be served by different workers.
         """
         if robot is None:
-            if name == "robot.json" and self.robot is not None:
-                return robot_json(self.robot.sim.params, self.robot.sim.lidar.params)
-            return None
+            if self.robot is not None:  # one robot: its description; config.json the file
+                return robot_json(self.robot.sim.params, self.robot.sim.lidar.params) \
+                    if name == "robot.json" else None
+            if name == "robot.json":  # a class's root (the dashboard): a class robot's
+                return self.new_robot_json
+            url = f"ws://{_url_name(hostname)}:{self.ws_port}/"
+            return json.dumps({"about": "the instructor's view of this class, filled by "
+                                        "websim serve", "ws": url, "adminWs": url})
         if name == "robot.json":
             host = dict(self.class_hosts()).get(robot)
             if host is None:

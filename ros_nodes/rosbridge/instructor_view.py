@@ -99,16 +99,16 @@ class InstructorView:
                 for bridge, inner in self._inner.values():
                     bridge.handle(inner, to_json(message))
                 return
-            name = resolve_name(message[field])
+            name = message[field]
             if op == "call_service" and name == ROBOTS_SERVICE:
                 self._robots(session, message)
                 return
-            robot, _, rest = name[1:].partition("/")
+            robot, _, rest = name.lstrip("/").partition("/")  # robot names: a-z 0-9 _ -
             bridge, inner = self._robot(session, robot)
             if not rest:
                 raise BridgeError(f"'{name[:80]}': name a robot's topic or service, "
                                   f"/{robot}/NAME")
-            message[field] = f"/{rest}"
+            message[field] = resolve_name(f"/{rest}")
             message.pop("compression", None)  # rewritten as text: no CBOR on this view
             bridge.handle(inner, to_json(message))
         except (ProtocolError, BridgeError) as error:

@@ -1,0 +1,39 @@
+// What a card says (web-interface/js/class-grid.js): clients, payload, the pause badge, links.
+import assert from 'node:assert/strict';
+import { test } from 'node:test';
+
+import {
+  capitalized, clientsText, pauseBadge, payloadText, robotPageUrl,
+} from '../../web-interface/js/class-grid.js';
+import { parseStatus } from '../../web-interface/js/class-state.js';
+import { robot } from './robot.mjs';
+
+test('clients: all of them, the admins (the dashboard is one) counted apart', () => {
+  assert.equal(clientsText(null), '–');
+  assert.equal(clientsText(parseStatus({ clients: [] })), '0');
+  assert.equal(clientsText(parseStatus({ clients: [
+    { address: 'a:1', admin: false }, { address: 'b:2', admin: false },
+    { address: 'c:3', admin: true }] })), '3 (1 admin)');
+});
+
+test('payload ×1 and ×2 by robot.json\'s defaults, another one by its mass', () => {
+  const { mass_kg: mass, inertia_kg_m2: inertia } = robot.robot;
+  const status = (m, i) => parseStatus({ mass_kg: m, inertia_kg_m2: i });
+  assert.equal(payloadText(status(mass, inertia), robot), 'payload ×1');
+  assert.equal(payloadText(status(2 * mass, 2 * inertia), robot), 'payload ×2');
+  assert.equal(payloadText(status(3, inertia), robot), 'payload 3.00 kg');
+  assert.equal(payloadText(null, robot), 'payload –');
+});
+
+test('the pause badge tells the instructor\'s pause from an idle robot', () => {
+  assert.equal(pauseBadge(parseStatus({ paused: true, held: true })), 'paused');
+  assert.equal(pauseBadge(parseStatus({ paused: true, held: false })), 'idle');
+  assert.equal(pauseBadge(parseStatus({ paused: false })), '');
+  assert.equal(pauseBadge(null), '');
+});
+
+test('a robot\'s page link and button labels', () => {
+  assert.equal(robotPageUrl('robot05'), '/robots/robot05/');
+  assert.equal(robotPageUrl('a b'), '/robots/a%20b/');
+  assert.equal(capitalized('dynamic'), 'Dynamic');
+});
