@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from typing import Any
+
 import pytest
 
 from physics import RobotParams, Simulation, World, load_world
@@ -41,8 +44,19 @@ def server():
     running.stop()
 
 
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    """Debian's chromium under Playwright; each launch gets a fresh temporary profile."""
+    from chromium import launched_chromium
+
+    with launched_chromium() as launched:
+        yield launched
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Mark every test that drives Chromium (it uses the ``browser`` fixture) as ``browser``."""
+    """Mark every test that drives Chromium (this file's ``browser`` fixture) ``browser``."""
     for item in items:
-        if "browser" in getattr(item, "fixturenames", ()):
+        info = getattr(item, "_fixtureinfo", None)
+        definitions = info.name2fixturedefs.get("browser", ()) if info is not None else ()
+        if definitions and definitions[-1].func is browser.__wrapped__:  # type: ignore[attr-defined]
             item.add_marker(pytest.mark.browser)

@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 from websockets.sync.client import connect
 
-from chromium import launched_chromium, skip_reason
+from chromium import skip_reason
 from server_process import ServerProcess, start_server, wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -37,12 +37,6 @@ def server(links: Path) -> Iterator[ServerProcess]:
     running = start_server(["--class", "3", "--links", str(links)])
     yield running
     running.stop()
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Any]:
-    with launched_chromium() as launched:
-        yield launched
 
 
 def robot_state(server: ServerProcess, name: str) -> dict[str, Any]:

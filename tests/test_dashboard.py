@@ -26,7 +26,7 @@ import pytest
 from playwright.sync_api import TimeoutError as PlaywrightTimeoutError
 from websockets.sync.client import ClientConnection, connect
 
-from chromium import launched_chromium, skip_reason
+from chromium import skip_reason
 from server_process import ADMIN_TOKEN, ServerProcess, start_server, wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -124,12 +124,6 @@ def server() -> Iterator[ServerProcess]:
     running = start_server(["--class", str(CLASS_SIZE)])
     yield running
     running.stop()
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Any]:
-    with launched_chromium() as launched:
-        yield launched
 
 
 @dataclass

@@ -40,7 +40,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 from websockets.sync.server import Request, ServerConnection, serve
 
-from chromium import launched_chromium, skip_reason
+from chromium import skip_reason
 from server_process import ADMIN_TOKEN, ServerProcess, free_port, start_server, wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -181,13 +181,6 @@ def twist_pairs(messages: list[dict[str, Any]]) -> list[tuple[float, float]]:
 
 
 # --- The browser ---------------------------------------------------------------------------
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Any]:
-    """Debian's chromium under Playwright; each launch gets a fresh temporary profile."""
-    with launched_chromium() as launched:
-        yield launched
-
 
 @dataclass
 class PageLog:

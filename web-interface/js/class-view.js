@@ -9,7 +9,7 @@
 
 import { composePose } from './ros-msgs.js';
 import { displayPose } from './class-state.js';
-import { COLORS } from './view.js';
+import { COLORS, paintWalls } from './view.js';
 
 /** Room (CSS px) between the world's bounds and the canvas's edges; the top holds the chips. */
 const FIT_PAD_PX = Object.freeze({ top: 22, right: 6, bottom: 6, left: 6 });
@@ -116,7 +116,8 @@ export class RobotThumb {
     ctx.fillStyle = COLORS.background;
     ctx.fillRect(0, 0, this.cssWidth, this.cssHeight);
     if (withWalls) {
-      paintWalls(ctx, state.markers, (x, y) => this.worldToScreen(x, y), this.camera.scale);
+      paintWalls(ctx, state.markers, (x, y) => this.worldToScreen(x, y), this.camera.scale,
+        MIN_WALL_PX);
     }
     return layer;
   }
@@ -158,25 +159,3 @@ export class RobotThumb {
   }
 }
 
-/** The world's walls and discs (ros-msgs.js applyMarkerArray shapes) at `scale` px/m. */
-function paintWalls(ctx, markers, toScreen, scale) {
-  ctx.lineCap = 'round';
-  ctx.strokeStyle = COLORS.wall;
-  ctx.fillStyle = COLORS.disc;
-  for (const shape of markers.values()) {
-    if (shape.kind === 'segments') {
-      ctx.lineWidth = Math.max(MIN_WALL_PX, shape.width * scale);
-      ctx.beginPath();
-      for (const [x1, y1, x2, y2] of shape.segments) {
-        ctx.moveTo(...toScreen(x1, y1));
-        ctx.lineTo(...toScreen(x2, y2));
-      }
-      ctx.stroke();
-    } else {
-      const [sx, sy] = toScreen(shape.x, shape.y);
-      ctx.beginPath();
-      ctx.arc(sx, sy, shape.radius * scale, 0, 2 * Math.PI);
-      ctx.fill();
-    }
-  }
-}

@@ -392,13 +392,17 @@ export class View {
 }
 
 /** Draws the world's walls and discs with `toScreen(x, y) -> [sx, sy]` at `scale` px/m. */
-function paintWalls(ctx, markers, toScreen, scale) {
+/**
+ * The world's walls and discs (ros-msgs.js applyMarkerArray shapes) at `scale` px/m; walls are
+ * at least `minWidthPx` wide. Also the dashboard's (class-view.js), with thinner walls.
+ */
+export function paintWalls(ctx, markers, toScreen, scale, minWidthPx = 2) {
   ctx.lineCap = 'round';
   ctx.strokeStyle = COLORS.wall;
   ctx.fillStyle = COLORS.disc;
   for (const shape of markers.values()) {
     if (shape.kind === 'segments') {
-      ctx.lineWidth = Math.max(2, shape.width * scale);
+      ctx.lineWidth = Math.max(minWidthPx, shape.width * scale);
       ctx.beginPath();
       for (const [x1, y1, x2, y2] of shape.segments) {
         ctx.moveTo(...toScreen(x1, y1));
