@@ -88,6 +88,7 @@ from bench_server import (
     twist_frame,
     wait_for_condition,
 )
+from load import Commands
 
 from ros_nodes.topics import ODOM
 
@@ -97,15 +98,6 @@ PUBLISH_PERIOD_S = 0.1
 PUBLISH_GAP_SPREAD = 0.5
 """Gaps between commands are uniform in (1 ± this) periods, so commands land at every phase
 of the 50 ms tick."""
-
-SPEED_MPS = 0.05
-"""About the speed every driver commands (m/s), alternating in sign to stay near spawn."""
-
-SPEED_STEP_MPS = 1e-7
-"""Speeds of different commands differ by this much (m/s); /odom echoes them exactly."""
-
-COMMANDS_PER_DRIVER = 1000
-"""Distinct speeds per driver before they repeat (100 s at 10 Hz)."""
 
 LOST_AFTER_S = 1.0
 """A command neither answered nor superseded this long after it was sent is lost."""
@@ -160,7 +152,7 @@ def odom_speed_and_stamp(frame: str | bytes) -> tuple[float, float]:
     return float(msg["twist"]["twist"]["linear"]["x"]), stamp["sec"] + 1e-9 * stamp["nanosec"]
 
 
-class Driver:
+class Driver(Commands):
     """One robot's only driver: commands with speeds no other command has, and their latency.
 
     Args:
@@ -168,36 +160,14 @@ class Driver:
     """
 
     def __init__(self, index: int) -> None:
-        self.seed = index
-        self._base_mps = SPEED_MPS + index * SPEED_STEP_MPS * COMMANDS_PER_DRIVER
-        self._sequence = 0
-        self._sent_s: dict[float, float] = {}
-        self.latencies_s: list[float] = []
+        super().__init__(index, [])
         self.stamp_delays_s: list[float] = []
-        self.superseded = 0
-
-    def next_speed(self) -> float:
-        """A fresh speed (m/s), alternating in sign."""
-        self._sequence += 1
-        magnitude = self._base_mps + (self._sequence % COMMANDS_PER_DRIVER) * SPEED_STEP_MPS
-        return magnitude if self._sequence % 2 else -magnitude
-
-    def sent(self, speed_mps: float) -> None:
-        """Note when a command left."""
-        self._sent_s[speed_mps] = time.perf_counter()
 
     def on_odom(self, frame: str | bytes, received_s: float) -> None:
-        """Time the command this /odom shows, if new; older ones were superseded."""
+        """Time the command this /odom shows, if new; note how late the /odom came."""
         speed, stamp_s = odom_speed_and_stamp(frame)
         self.stamp_delays_s.append(time.time() - stamp_s)
-        sent_s = self._sent_s.get(speed)
-        if sent_s is None:
-            return
-        self.latencies_s.append(received_s - sent_s)
-        older = [key for key, value in self._sent_s.items() if value <= sent_s]
-        self.superseded += len(older) - 1
-        for key in older:
-            del self._sent_s[key]
+        self.on_speed(speed, received_s)
 
     def lost(self, since_s: float, now_s: float) -> int:
         """Commands sent since ``since_s`` still unanswered LOST_AFTER_S before ``now_s``."""

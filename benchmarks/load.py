@@ -113,7 +113,10 @@ class Commands:
 
     def on_odom(self, frame: str | bytes, received_s: float) -> None:
         """Time the command this /odom shows, if it is ours; older ones were superseded."""
-        speed = json.loads(frame)["msg"]["twist"]["twist"]["linear"]["x"]
+        self.on_speed(json.loads(frame)["msg"]["twist"]["twist"]["linear"]["x"], received_s)
+
+    def on_speed(self, speed: float, received_s: float) -> None:
+        """An /odom showing ``speed`` arrived at ``received_s`` (perf_counter s)."""
         sent_s = self._sent_s.get(speed)
         if sent_s is None:
             return
