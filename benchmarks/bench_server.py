@@ -54,6 +54,8 @@ import asyncio
 import contextlib
 import dataclasses
 import json
+import multiprocessing
+import multiprocessing.process
 import os
 import platform
 import random
@@ -67,6 +69,7 @@ import time
 import urllib.request
 from collections.abc import Callable, Iterator, Sequence
 from importlib.metadata import version
+from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
@@ -80,6 +83,9 @@ from ros_nodes.topics import CMD_VEL, ODOM, SCAN, TF, TopicSpec
 PROJECT_DIR = Path(__file__).resolve().parent.parent
 """The checkout: the server runs as ``python -m websim.cli`` from here."""
 
+SPARE_CLIENTS = 10
+"""Connections the server admits beyond the measured clients (the CBOR probe, /healthz)."""
+
 HOST = "127.0.0.1"
 """The only address the benchmark binds or connects to."""
 
@@ -91,6 +97,9 @@ SUBSCRIBED = (ODOM, TF, SCAN)
 
 PUBLISH_PREFIX = '{"op":"publish","topic":"'
 """How the server's compact JSON starts a topic frame; the topic name follows it."""
+
+PUBLISH_PREFIX_BYTES = PUBLISH_PREFIX.encode()
+"""The same, of a text frame read undecoded (``recv(decode=False)``)."""
 
 SPEEDS_MPS = (0.2, 0.1)
 """Commanded |linear.x| (m/s), well below the 0.5 m/s limit, so odometry shows them unclamped."""
@@ -124,6 +133,11 @@ SERVER_STOP_TIMEOUT_S = 10.0
 
 CONNECT_TIMEOUT_S = 20.0
 """Longest wait for all clients to connect and receive every topic once."""
+
+CLIENTS_PER_READER_PROCESS = 100
+"""Up to this many clients, all run in the benchmark's process; beyond, the subscribers other
+than the driver run in two processes of their own: one Python event loop receiving 500
+clients' frames would queue the driver's /odom behind them and time itself, not the server."""
 
 RSS_SAMPLE_PERIOD_S = 0.25
 """Sampling period of the server's resident memory."""
@@ -247,6 +261,9 @@ def topic_of(frame: str | bytes) -> str | None:
     if isinstance(frame, str) and frame.startswith(PUBLISH_PREFIX):
         end = frame.find('"', len(PUBLISH_PREFIX))
         return frame[len(PUBLISH_PREFIX):end]
+    if isinstance(frame, bytes) and frame.startswith(PUBLISH_PREFIX_BYTES):
+        end = frame.find(b'"', len(PUBLISH_PREFIX_BYTES))
+        return frame[len(PUBLISH_PREFIX_BYTES):end].decode()
     try:
         message = json.loads(frame)
     except ValueError:
@@ -272,10 +289,15 @@ class Client:
         self.first_frame: dict[str, str | bytes] = {}
 
     async def read(self) -> None:
-        """Count frames until the connection closes."""
+        """Count frames until the connection closes.
+
+        Text frames are read as their UTF-8 bytes: counting them needs no decoding, and the
+        clients' own CPU competes with the server on a small machine.
+        """
         counts, on_odom = self.counts, self.on_odom
         with contextlib.suppress(ConnectionClosed):
-            async for frame in self.connection:
+            while True:
+                frame = await self.connection.recv(decode=False)
                 received_s = time.perf_counter()
                 topic = topic_of(frame)
                 if topic not in counts:
@@ -398,7 +420,7 @@ class Result:
         jitter_p99_ms: the server's tick lateness p99 at the end of the window (ms).
         server_cpu_percent: server CPU time over the window / window length (% of one core).
         server_rss_peak_mb: the server's peak resident memory in the window (MB).
-        client_cpu_percent: the same CPU figure for this benchmark process (% of one core).
+        client_cpu_percent: the same CPU figure for the benchmark's processes (% of one core).
         received_mbps: bytes all clients received per second (MB/s).
         scan_json_bytes: one /scan frame as JSON text (bytes).
         scan_cbor_bytes: one /scan frame as CBOR (bytes).
@@ -465,38 +487,170 @@ def cpu_seconds(process: psutil.Process) -> float:
     return float(times.user + times.system)
 
 
-async def measure(server: Server, n_clients: int, window_s: float, seed: int) -> Result:
-    """Connect ``n_clients``, measure one window, disconnect; the server keeps running."""
+async def connect_subscribers(url: str, n_clients: int,
+                              on_odom: Callable[[str | bytes, float], None] | None = None,
+                              ) -> tuple[list[Client], list[asyncio.Task[None]]]:
+    """Connect ``n_clients`` that subscribe to every topic and count what they receive.
+
+    ``on_odom`` is given the first client's /odom frames (the driver's).
+    """
+    connections = await asyncio.wait_for(asyncio.gather(*(
+        connect(url, compression=None, ping_interval=None, close_timeout=2,
+                open_timeout=CONNECT_TIMEOUT_S) for _ in range(n_clients))),
+        CONNECT_TIMEOUT_S)
+    clients, readers = [], []
+    for index, connection in enumerate(connections):
+        client = Client(connection, on_odom if index == 0 else None)
+        clients.append(client)
+        readers.append(asyncio.create_task(client.read()))
+        for spec in SUBSCRIBED:
+            await connection.send(subscribe_frame(spec))
+    await wait_for_condition(
+        lambda: all(min(client.counts.values()) > 0 for client in clients),
+        CONNECT_TIMEOUT_S, "every client to receive every topic")
+    return clients, readers
+
+
+async def close_clients(clients: Sequence[Client], readers: Sequence[asyncio.Task[None]]) -> None:
+    """Close every client's connection and stop its reader."""
+    await asyncio.gather(*(client.connection.close() for client in clients),
+                         return_exceptions=True)
+    for reader in readers:
+        reader.cancel()
+    await asyncio.gather(*readers, return_exceptions=True)
+
+
+def reader_process(url: str, n_clients: int, pipe: Connection) -> None:
+    """A process of ``n_clients`` subscribers (``multiprocessing`` target).
+
+    It sends ``"ready"`` once every client received every topic, then answers each
+    ``"snapshot"`` with (per client: counts per topic, bytes received), until ``"stop"``.
+    """
+    async def serve() -> None:
+        clients, readers = await connect_subscribers(url, n_clients)
+        pipe.send("ready")
+        try:
+            while (request := await asyncio.to_thread(pipe.recv)) != "stop":
+                assert request == "snapshot", request
+                pipe.send([(client.snapshot(), client.received_bytes) for client in clients])
+        finally:
+            await close_clients(clients, readers)
+
+    try:
+        run = client_runner()
+        run(serve())
+    except Exception as error:  # the parent reads this instead of "ready"
+        pipe.send(f"reader process failed: {type(error).__name__}: {error}")
+
+
+def client_runner() -> Callable[[Any], Any]:
+    """The reader processes' ``run``: uvloop's where it is installed, else asyncio's.
+
+    The load then costs less CPU, which on a small machine is CPU the server does not get.
+    The server's loop is its own choice (``--event-loop``).
+    """
+    try:
+        import uvloop
+    except ImportError:
+        return asyncio.run
+    return uvloop.run
+
+
+class ReaderPool:
+    """Subscribers in processes of their own.
+
+    So the driver's latency is not queued behind the other clients' frames in one event loop.
+
+    Args:
+        url: the server's WebSocket URL.
+        n_clients: subscribers over all the processes.
+        n_processes: how many processes share them.
+    """
+
+    def __init__(self, url: str, n_clients: int, n_processes: int) -> None:
+        context = multiprocessing.get_context("spawn")
+        shares = [n_clients // n_processes + (i < n_clients % n_processes)
+                  for i in range(n_processes)]
+        self._pipes: list[Connection] = []
+        self.processes: list[multiprocessing.process.BaseProcess] = []
+        for share in filter(None, shares):
+            parent_end, child_end = context.Pipe()
+            process = context.Process(target=reader_process, args=(url, share, child_end),
+                                      daemon=True)
+            process.start()
+            self._pipes.append(parent_end)
+            self.processes.append(process)
+
+    def _ask(self, pipe: Connection, timeout_s: float) -> Any:
+        if not pipe.poll(timeout_s):
+            raise RuntimeError(f"a reader process did not answer within {timeout_s:g} s")
+        answer = pipe.recv()
+        if isinstance(answer, str) and answer.startswith("reader process failed"):
+            raise RuntimeError(answer)
+        return answer
+
+    def wait_ready(self) -> None:
+        """Block until every process's clients received every topic."""
+        for pipe in self._pipes:
+            self._ask(pipe, CONNECT_TIMEOUT_S + 10.0)
+
+    def snapshot(self) -> list[tuple[dict[str, int], int]]:
+        """Every subscriber's (counts per topic, bytes received) now."""
+        for pipe in self._pipes:
+            pipe.send("snapshot")
+        return [entry for pipe in self._pipes for entry in self._ask(pipe, 10.0)]
+
+    def cpu_seconds(self) -> float:
+        """CPU time of the reader processes so far (s)."""
+        return sum(cpu_seconds(psutil.Process(process.pid)) for process in self.processes)
+
+    def stop(self) -> None:
+        """Close every subscriber and end the processes."""
+        for pipe in self._pipes:
+            with contextlib.suppress(OSError):
+                pipe.send("stop")
+        for process in self.processes:
+            process.join(timeout=10.0)
+            if process.is_alive():
+                process.kill()
+
+
+async def measure(server: Server, n_clients: int, window_s: float, seed: int,
+                  reader_processes: int) -> Result:
+    """Connect ``n_clients``, measure one window, disconnect; the server keeps running.
+
+    The driver (client 0) runs in this process; the other clients in ``reader_processes``
+    processes of their own (none: here too).
+    """
     driver = Driver(random.Random(seed))
     clients: list[Client] = []
     readers: list[asyncio.Task[None]] = []
+    pool = ReaderPool(server.ws_url, n_clients - 1, reader_processes) \
+        if reader_processes > 0 and n_clients > 1 else None
+    in_process = 1 if pool is not None else n_clients
     try:
-        connections = await asyncio.wait_for(asyncio.gather(*(
-            connect(server.ws_url, compression=None, ping_interval=None, close_timeout=2,
-                    open_timeout=CONNECT_TIMEOUT_S) for _ in range(n_clients))),
-            CONNECT_TIMEOUT_S)
-        for index, connection in enumerate(connections):
-            client = Client(connection, driver.on_odom if index == 0 else None)
-            clients.append(client)
-            readers.append(asyncio.create_task(client.read()))
-            for spec in SUBSCRIBED:
-                await connection.send(subscribe_frame(spec))
-        await wait_for_condition(
-            lambda: all(min(client.counts.values()) > 0 for client in clients),
-            CONNECT_TIMEOUT_S, "every client to receive every topic")
+        clients, readers = await connect_subscribers(server.ws_url, in_process, driver.on_odom)
+        if pool is not None:
+            await asyncio.to_thread(pool.wait_ready)
         scan_cbor_bytes = await cbor_scan_bytes(server.ws_url)
         first_scan = clients[0].first_frame[SCAN.name]
         scan_json_bytes = len(first_scan.encode() if isinstance(first_scan, str)
                               else first_scan)
+
+        def snapshot() -> list[tuple[dict[str, int], int]]:
+            here = [(client.snapshot(), client.received_bytes) for client in clients]
+            return here + (pool.snapshot() if pool is not None else [])
+
+        def client_cpu_s() -> float:
+            return cpu_seconds(this_process) + (pool.cpu_seconds() if pool is not None else 0)
 
         server_process = psutil.Process(server.process.pid)
         this_process = psutil.Process()
         rss_peak = [0]
         rss_sampler = asyncio.create_task(sample_rss(server_process, rss_peak))
         before = await asyncio.to_thread(server.health)
-        counts_before = [client.snapshot() for client in clients]
-        bytes_before = sum(client.received_bytes for client in clients)
-        cpu_before = (cpu_seconds(server_process), cpu_seconds(this_process))
+        counts_before = await asyncio.to_thread(snapshot)
+        cpu_before = (cpu_seconds(server_process), client_cpu_s())
         delivery_start = len(driver.delivery_s)
         start_s = time.perf_counter()
 
@@ -504,18 +658,15 @@ async def measure(server: Server, n_clients: int, window_s: float, seed: int) ->
                                window_s + SAMPLE_TIMEOUT_S + 5.0)
 
         after = await asyncio.to_thread(server.health)
-        counts_after = [client.snapshot() for client in clients]
+        counts_after = await asyncio.to_thread(snapshot)
         delivery_end = len(driver.delivery_s)
-        bytes_after = sum(client.received_bytes for client in clients)
         elapsed_s = time.perf_counter() - start_s
-        cpu_after = (cpu_seconds(server_process), cpu_seconds(this_process))
+        cpu_after = (cpu_seconds(server_process), client_cpu_s())
         rss_sampler.cancel()
     finally:
-        await asyncio.gather(*(client.connection.close() for client in clients),
-                             return_exceptions=True)
-        for reader in readers:
-            reader.cancel()
-        await asyncio.gather(*readers, return_exceptions=True)
+        await close_clients(clients, readers)
+        if pool is not None:
+            await asyncio.to_thread(pool.stop)
 
     ticks_before, ticks_after = int(before["ticks"]), int(after["ticks"])
     in_window = slice(delivery_start, delivery_end)
@@ -523,7 +674,10 @@ async def measure(server: Server, n_clients: int, window_s: float, seed: int) ->
     for spec in SUBSCRIBED:
         expected = expected_frames(spec, ticks_before, ticks_after)
         delivered[spec.name] = [(late[spec.name] - early[spec.name]) / expected
-                                for early, late in zip(counts_before, counts_after, strict=True)]
+                                for (early, _), (late, _) in zip(counts_before, counts_after,
+                                                                 strict=True)]
+    bytes_before = sum(received for _, received in counts_before)
+    bytes_after = sum(received for _, received in counts_after)
     return Result(
         clients=n_clients, window_s=elapsed_s, ticks=ticks_after - ticks_before,
         latencies_ms=[1e3 * latency for latency in driver.latencies_s], lost=driver.lost,
@@ -537,12 +691,21 @@ async def measure(server: Server, n_clients: int, window_s: float, seed: int) ->
         scan_json_bytes=scan_json_bytes, scan_cbor_bytes=scan_cbor_bytes)
 
 
-def run_one(n_clients: int, window_s: float, seed: int, log_dir: Path) -> Result:
+def reader_processes_for(n_clients: int) -> int:
+    """How many processes the subscribers other than the driver get by default."""
+    return 0 if n_clients <= CLIENTS_PER_READER_PROCESS else 2
+
+
+def run_one(n_clients: int, window_s: float, seed: int, log_dir: Path,
+            reader_processes: int | None = None, server_args: Sequence[str] = ()) -> Result:
     """Start a fresh server, measure with ``n_clients``, and stop the server."""
-    with running_server(log_dir) as server:
+    if reader_processes is None:
+        reader_processes = reader_processes_for(n_clients)
+    with running_server(log_dir, ["--max-clients", str(n_clients + SPARE_CLIENTS),
+                                  *server_args]) as server:
         try:
             return asyncio.run(asyncio.wait_for(
-                measure(server, n_clients, window_s, seed),
+                measure(server, n_clients, window_s, seed, reader_processes),
                 CONNECT_TIMEOUT_S + window_s + SAMPLE_TIMEOUT_S + 30.0))
         except Exception:
             print(f"websim serve output (last lines):\n{server.log_tail()}", file=sys.stderr)
@@ -669,6 +832,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="smoke run: 4 s windows")
     parser.add_argument("--markdown", action="store_true", help="print a Markdown table")
     parser.add_argument("--seed", type=int, default=1, help="seed of the command timing")
+    parser.add_argument("--reader-processes", type=int, default=None,
+                        help="processes for the subscribers other than the driver (default: "
+                             f"none up to {CLIENTS_PER_READER_PROCESS} clients, else 2)")
+    parser.add_argument("--event-loop", choices=("uvloop", "asyncio"), default=None,
+                        help="the server's event loop (default: websim serve's)")
     args = parser.parse_args(argv)
     if any(n < 1 for n in args.clients):
         parser.error("--clients: every count must be at least 1")
@@ -676,6 +844,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if window_s < 2 * SAMPLE_TIMEOUT_S:
         parser.error(f"--seconds: at least {2 * SAMPLE_TIMEOUT_S:g}")
 
+    server_args = ["--event-loop", args.event_loop] if args.event_loop else []
     signal.signal(signal.SIGTERM, _interrupt)  # so the server is stopped on SIGTERM too
     results = []
     try:
@@ -683,13 +852,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             for n_clients in args.clients:
                 print(f"measuring {n_clients} client(s) for {window_s:g} s ...",
                       file=sys.stderr, flush=True)
-                results.append(run_one(n_clients, window_s, args.seed, Path(log_dir)))
+                results.append(run_one(n_clients, window_s, args.seed, Path(log_dir),
+                                       args.reader_processes, server_args))
     except KeyboardInterrupt:
         print("interrupted; the server was stopped", file=sys.stderr)
         return 130
 
     print(f"websim serve benchmark{' (quick)' if args.quick else ''}: empty world, kinematic, "
-          f"{window_s:g} s window per client count, clients subscribe /odom /tf /scan (JSON)")
+          f"{window_s:g} s window per client count, clients subscribe /odom /tf /scan (JSON)"
+          f"{', event loop ' + args.event_loop if args.event_loop else ''}")
     print(f"Python {platform.python_version()}, websockets {version('websockets')}, "
           f"{os.cpu_count()} CPUs, {platform.platform()}\n")
     rows = rows_of(results)

@@ -63,6 +63,10 @@ class PrefixingOutbox(Outbox):
         """Forget the forwarded frames of a topic."""
         self._target.discard_topic(self._prefix + topic)
 
+    def send_now(self) -> None:
+        """Have the instructor's connection write what waits now."""
+        self._target.send_now()
+
 
 class InstructorView:
     """One instructor connection's view of every robot of a class.

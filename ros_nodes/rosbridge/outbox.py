@@ -18,23 +18,30 @@ Frame = str | bytes
 """A WebSocket message: text (JSON) or binary (CBOR)."""
 
 
+def _sequence_of(entry: tuple[int, Frame]) -> int:
+    return entry[0]
+
+
 class Outbox:
     """Frames waiting to be sent to one client.
 
     Args:
         max_bytes: most bytes (characters of text frames) that may wait at once.
         max_replies: most replies that may wait at once.
-        wake: called whenever a frame is added (the writer task's event).
+        wake: called whenever a frame is added (the connection schedules a write).
+        send: writes what waits at once (``send_now``), if the transport can.
     """
 
     def __init__(self, max_bytes: int = 4 << 20, max_replies: int = 1000,
-                 wake: Callable[[], None] | None = None) -> None:
+                 wake: Callable[[], None] | None = None,
+                 send: Callable[[], None] | None = None) -> None:
         self._replies: deque[Frame] = deque()
         self._topics: dict[str, deque[tuple[int, Frame]]] = {}
         self._sequence = itertools.count()
         self._max_bytes = max_bytes
         self._max_replies = max_replies
         self._wake = wake
+        self._send = send
         self.queued_bytes = 0
         """Bytes of every frame waiting."""
         self.dropped = 0
@@ -69,6 +76,11 @@ class Outbox:
         queue.append((next(self._sequence), frame))
         self._grow(len(frame))
 
+    def send_now(self) -> None:
+        """Have what waits written now rather than after the current callback (a tick)."""
+        if self._send is not None:
+            self._send()
+
     def discard_topic(self, topic: str) -> None:
         """Forget frames of a topic the client unsubscribed from."""
         queue = self._topics.pop(topic, None)
@@ -89,6 +101,28 @@ class Outbox:
             frame = oldest.popleft()[1]
         self.queued_bytes -= len(frame)
         return frame
+
+    def take(self, max_bytes: int) -> list[Frame]:
+        """The next frames to send, in ``pop`` order, up to about ``max_bytes`` (at least one).
+
+        Everything at once when it all fits (a client that keeps up: one tick's frames).
+        """
+        if self.queued_bytes > max_bytes:
+            frames: list[Frame] = []
+            while max_bytes > 0 and (frame := self.pop()) is not None:
+                frames.append(frame)
+                max_bytes -= len(frame)
+            return frames
+        frames = list(self._replies)
+        self._replies.clear()
+        topic_frames = [entry for queue in self._topics.values() for entry in queue]
+        if topic_frames:
+            topic_frames.sort(key=_sequence_of)
+            frames.extend(frame for _, frame in topic_frames)
+            for queue in self._topics.values():
+                queue.clear()
+        self.queued_bytes = 0
+        return frames
 
     def _grow(self, size: int) -> None:
         self.queued_bytes += size

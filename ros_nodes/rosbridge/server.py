@@ -32,6 +32,7 @@ from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
+from websockets.protocol import State
 
 from physics import TICK_PERIOD_S
 from ros_nodes.rosbridge.bridge import Bridge
@@ -39,6 +40,7 @@ from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy, RateLimit, To
 from ros_nodes.rosbridge.outbox import Frame, Outbox
 from ros_nodes.rosbridge.robot_host import RobotHost, Schedule, TickStats
 from ros_nodes.rosbridge.session import Session
+from ros_nodes.rosbridge.wire import WireFrames
 from ros_nodes.virtual_robot_core import VirtualRobot
 
 log = logging.getLogger("websim.server")
@@ -77,6 +79,10 @@ longer read, so its close frame would only arrive behind them; its buffers go at
 ROBOTS_PREFIX = "/robots/"
 """Where a class's robots are: ``ws://HOST:9090/robots/NAME``."""
 
+WRITE_BUFFER_BYTES = 64 << 10
+"""What may wait in a client's transport buffer (beyond the kernel's) before its frames are
+written one at a time, each after the socket drained (websockets' ``send``)."""
+
 SEND_BUFFER_BYTES = 128 << 10
 """Kernel send buffer per client (Linux doubles it). Autotuned, it grows to about 4 MB, which a
 client that stops reading fills at the stream's ~100 kB/s for most of a minute before its
@@ -114,6 +120,8 @@ class WebSocketFront(abc.ABC):
         self._admin_token = admin_token
         self._origins = origins
         self.started_monotonic_s = time.monotonic()
+        self.wire = WireFrames()
+        """Outgoing frames serialized once for all the clients they go to."""
 
     @abc.abstractmethod
     def route(self, path: str) -> tuple[RobotHost, str | None] | str:
@@ -196,7 +204,7 @@ class WebSocketFront(abc.ABC):
         if view is not None:
             log.info("instructor %s connected to the class's root view", peer)
             await ClientConnection(view, self.schedule_of_view(), connection, peer, True,
-                                   self.limits).run()
+                                   self.limits, self.wire).run()
             return
         routed = self.route(target.path)
         if isinstance(routed, str):  # pragma: no cover - refused at the handshake
@@ -206,7 +214,7 @@ class WebSocketFront(abc.ABC):
         if token and not is_admin:
             log.warning("client %s presented a wrong admin token", peer)
         await ClientConnection(host.bridge, host.schedule, connection, peer, is_admin,
-                               self.limits).run()
+                               self.limits, self.wire).run()
 
     def _uptime_s(self) -> float:
         return round(time.monotonic() - self.started_monotonic_s, 3)
@@ -270,17 +278,23 @@ class ClientConnection:
         peer: its address, for logs.
         is_admin: whether it presented the admin token.
         limits: the bounds it lives within.
+        wire: where its frames are serialized (shared with the clients of the same server,
+            so a message is framed once).
     """
 
     def __init__(self, hub: Hub, schedule: Schedule, connection: ServerConnection, peer: str,
-                 is_admin: bool, limits: ClientLimits) -> None:
+                 is_admin: bool, limits: ClientLimits, wire: WireFrames | None = None) -> None:
         self._schedule = schedule
         self._bridge = hub
         self._connection = connection
         self._peer = peer
         self._limits = limits
-        self._wake = asyncio.Event()
-        outbox = Outbox(limits.max_queued_bytes, limits.max_replies, wake=self._wake.set)
+        self._wire = wire if wire is not None else WireFrames()
+        self._loop = asyncio.get_running_loop()
+        self._flush_due = False
+        self._backed_up = asyncio.Event()
+        outbox = Outbox(limits.max_queued_bytes, limits.max_replies, wake=self._wake,
+                        send=self._flush)
         self.session = Session(peer, is_admin, outbox, limits=limits)
         self._rate = RateLimit(limits.max_rate)
         self._handling = TokenBucket(limits.handling_share, limits.handling_burst_s)
@@ -295,12 +309,11 @@ class ClientConnection:
         self._bridge.connect(self.session)
         log.info("client %s connected%s", self._peer,
                  " (admin)" if self.session.is_admin else "")
-        tasks = [asyncio.create_task(self._write()), asyncio.create_task(self._watch())]
+        writer = asyncio.create_task(self._write())
         try:
             await self._read()
         finally:
-            for task in tasks:
-                task.cancel()
+            writer.cancel()
             self._bridge.disconnect(self.session)
             log.info("client %s disconnected", self._peer)
             if self._closing is not None:
@@ -323,19 +336,66 @@ class ClientConnection:
         except ConnectionClosed:
             pass
 
+    def _wake(self) -> None:
+        """The outbox got a frame: flush it once the current callback (a tick) is done."""
+        if not self._flush_due:
+            self._flush_due = True
+            self._loop.call_soon(self._scheduled_flush)
+
+    def _scheduled_flush(self) -> None:
+        self._flush_due = False
+        self._flush()
+
+    def _flush(self) -> None:
+        """Write what waits in the outbox onto the socket, in one write, without waiting.
+
+        Scheduled after the callback that queued a frame (``_wake``: a tick's frames go out
+        together), or called at once (``Outbox.send_now``: a client closing a loop).
+
+        Every frame goes out as its serialized bytes (``WireFrames``: framed once for all
+        subscribers); nothing else of websockets runs per frame. Past ``WRITE_BUFFER_BYTES``
+        in the transport's buffer the client is behind: the writer task takes over, through
+        websockets' ``send``, which waits for the socket to drain.
+        """
+        outbox = self.session.outbox
+        if outbox.overflowed is not None or self._closing is not None:
+            self._backed_up.set()  # the writer closes it
+            return
+        if self._backed_up.is_set() or self._connection.protocol.state is not State.OPEN:
+            return
+        transport = self._connection.transport
+        room = WRITE_BUFFER_BYTES - transport.get_write_buffer_size()
+        if room > 0:
+            wire = self._wire.of
+            chunks = [wire(frame) for frame in outbox.take(room)]
+            if chunks:
+                data = b"".join(chunks) if len(chunks) > 1 else chunks[0]
+                self._handed_bytes += len(data)
+                transport.write(data)
+        if len(outbox) > 0 or outbox.overflowed is not None:
+            self._backed_up.set()
+
     async def _write(self) -> None:
-        """Move frames from the outbox onto the socket, oldest first."""
+        """Serve a client that is behind: one frame at a time, waiting for its socket.
+
+        Only while it is behind does a watchdog look at its socket (``_watch``): a client
+        that keeps up has nothing waiting beyond ``WRITE_BUFFER_BYTES``.
+        """
         outbox = self.session.outbox
         try:
             while True:
-                await self._wake.wait()
-                self._wake.clear()
-                while outbox.overflowed is None and (frame := outbox.pop()) is not None:
-                    self._handed_bytes += len(frame)
-                    await self._connection.send(frame)
+                await self._backed_up.wait()
+                watchdog = asyncio.create_task(self._watch())
+                try:
+                    while outbox.overflowed is None and (frame := outbox.pop()) is not None:
+                        self._handed_bytes += len(frame)
+                        await self._connection.send(frame)  # waits while the socket is full
+                finally:
+                    watchdog.cancel()
                 if outbox.overflowed is not None:
                     self._close(POLICY_VIOLATION, outbox.overflowed)
                     return
+                self._backed_up.clear()  # caught up: back to flushing after each tick
         except ConnectionClosed:
             pass
 

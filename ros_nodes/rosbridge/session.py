@@ -32,16 +32,40 @@ class Subscription:
         queue_length: per id, how many of the newest messages may wait.
         compression: ``"none"`` or ``"cbor"``.
         last_sent_s: when the last message was queued (monotonic s).
+        throttle_in_force_ms: the least throttle over the ids (ms): what delivery obeys.
+        queue_in_force: the longest queue over the ids.
     """
 
     throttle_ms: dict[Any, float] = field(default_factory=dict)
     queue_length: dict[Any, int] = field(default_factory=dict)
     compression: str = "none"
     last_sent_s: float = -math.inf
+    throttle_in_force_ms: float = 0.0
+    queue_in_force: int = 0
+
+    def add(self, sub_id: Any, throttle_ms: float, queue_length: int) -> None:
+        """Add (or replace) subscribe id ``sub_id``."""
+        self.throttle_ms[sub_id] = throttle_ms
+        self.queue_length[sub_id] = queue_length
+        self._merge()
+
+    def remove(self, sub_id: Any) -> bool:
+        """Drop subscribe id ``sub_id``; whether any id is left."""
+        self.throttle_ms.pop(sub_id, None)
+        self.queue_length.pop(sub_id, None)
+        if not self.throttle_ms:
+            return False
+        self._merge()
+        return True
 
     def effective(self) -> tuple[float, int]:
         """(throttle_ms, queue_length) in force: the least throttle, the longest queue."""
-        return min(self.throttle_ms.values()), max(self.queue_length.values())
+        return self.throttle_in_force_ms, self.queue_in_force
+
+    def _merge(self) -> None:
+        """Computed when ids change, not for every message delivered."""
+        self.throttle_in_force_ms = min(self.throttle_ms.values())
+        self.queue_in_force = max(self.queue_length.values())
 
 
 class Session:

@@ -31,6 +31,13 @@ THROTTLE_JITTER_S = 0.005
 (rosbridge's definition), less this, so a 200 ms throttle on the 20 Hz /odom gives 5 Hz even
 when a tick starts a few milliseconds early relative to the last one sent."""
 
+CLOSING_LOOP_S = 1.0
+"""A client that published within this long closes a loop (a teleop page, a PID node): in
+every fan-out its frame is queued first and written at once (``Outbox.send_now``), before
+the message is queued for the clients that only watch. With 500 watchers, queueing and
+writing for all of them takes milliseconds; the driver's /odom does not wait for that
+(benchmarks/bench_server.py)."""
+
 LocalSubscriber = Callable[[Any, Session], None]
 """An in-process subscriber: called with a client's (canonical) message and its publisher.
 It raises ``ConfigError`` to refuse the message; the reason goes back to the publisher."""
@@ -71,6 +78,8 @@ class Topics:
         self._subscribers: dict[str, set[Session]] = {}
         self._local: dict[str, list[LocalSubscriber]] = {}
         self._latched: dict[str, Encoded] = {}
+        self._published_s: dict[Session, float] = {}
+        """When each client last published (monotonic s): the fan-out serves them first."""
         message_types.load()  # now, not at the first publish (it takes ~0.1 s)
 
     def handlers(self) -> dict[str, Callable[[Session, dict[str, Any]], None]]:
@@ -120,6 +129,7 @@ class Topics:
             self._drop_subscription(session, topic)
         for topic in list(session.advertised):
             self._drop_advertisement(session, topic)
+        self._published_s.pop(session, None)
 
     # ---- advertise ------------------------------------------------------------------------
 
@@ -197,6 +207,7 @@ class Topics:
                 callback(msg, session)
             except ConfigError as error:
                 raise BridgeError(f"{topic}: {error}") from None
+        self._published_s[session] = self._bridge.clock()
         encoded = Encoded(topic, msg)
         if latch:
             self._latched[topic] = encoded
@@ -204,23 +215,50 @@ class Topics:
         self._bridge.graph.publish(session, topic, type_name, msg)
 
     def _deliver(self, topic: str, encoded: Encoded) -> None:
+        subscribers = self._subscribers.get(topic)
+        if not subscribers:
+            return
         now = self._bridge.clock()
-        for session in self._subscribers.get(topic, ()):
-            subscription = session.subscriptions[topic]
-            throttle_ms, queue_length = subscription.effective()
-            gap_s = now - subscription.last_sent_s
-            if throttle_ms > 0 and gap_s < throttle_ms / 1000.0 - THROTTLE_JITTER_S:
-                continue
-            subscription.last_sent_s = now
-            try:
-                frame = encoded.frame(subscription.compression)
-            except (TypeError, ValueError) as error:  # a message no encoder can write
-                self._bridge.faults.record(f"encoding {topic}", error)
+        closing_loops = self._closing_loops(subscribers, now)
+        for session in closing_loops:
+            if not self._queue(session, topic, encoded, now):
                 return
-            try:
-                session.outbox.put_topic(topic, frame, queue_length)
-            except Exception as error:  # one client's fault is not the others'
-                self._bridge.faults.record(f"delivering {topic}", error)
+            session.outbox.send_now()
+        for session in subscribers:
+            if session not in closing_loops and not self._queue(session, topic, encoded, now):
+                return
+
+    def _queue(self, session: Session, topic: str, encoded: Encoded, now: float) -> bool:
+        """Queue ``encoded`` for ``session`` unless its throttle holds it back.
+
+        False: the message cannot be encoded at all (recorded; nobody gets it).
+        """
+        subscription = session.subscriptions[topic]
+        throttle_ms = subscription.throttle_in_force_ms
+        if throttle_ms > 0 and now - subscription.last_sent_s < \
+                throttle_ms / 1000.0 - THROTTLE_JITTER_S:
+            return True
+        subscription.last_sent_s = now
+        try:
+            frame = encoded.frame(subscription.compression)
+        except (TypeError, ValueError) as error:  # a message no encoder can write
+            self._bridge.faults.record(f"encoding {topic}", error)
+            return False
+        try:
+            session.outbox.put_topic(topic, frame, subscription.queue_in_force)
+        except Exception as error:  # one client's fault is not the others'
+            self._bridge.faults.record(f"delivering {topic}", error)
+        return True
+
+    def _closing_loops(self, subscribers: set[Session], now: float) -> dict[Session, None]:
+        """The ``subscribers`` that published within ``CLOSING_LOOP_S`` (in order)."""
+        if not self._published_s:
+            return {}
+        stale = [session for session, published_s in self._published_s.items()
+                 if now - published_s > CLOSING_LOOP_S]
+        for session in stale:
+            del self._published_s[session]
+        return {session: None for session in self._published_s if session in subscribers}
 
     # ---- subscribe ------------------------------------------------------------------------
 
@@ -239,8 +277,7 @@ class Topics:
                               f"{limits.max_ids_per_topic} subscribe ids on one topic")
         if subscription is None:
             subscription = session.subscriptions[topic] = Subscription()
-        subscription.throttle_ms[sub_id] = throttle_ms
-        subscription.queue_length[sub_id] = queue_length
+        subscription.add(sub_id, throttle_ms, queue_length)
         if message.get("compression") == "cbor":
             subscription.compression = "cbor"
         self._subscribers.setdefault(topic, set()).add(session)
@@ -256,11 +293,9 @@ class Topics:
         subscription = session.subscriptions.get(topic)
         if subscription is None:
             return
-        if "id" in message and message["id"] in subscription.throttle_ms:
-            del subscription.throttle_ms[message["id"]]
-            del subscription.queue_length[message["id"]]
-            if subscription.throttle_ms:
-                return
+        if "id" in message and message["id"] in subscription.throttle_ms \
+                and subscription.remove(message["id"]):
+            return
         self._drop_subscription(session, topic)
 
     def _drop_subscription(self, session: Session, topic: str) -> None:

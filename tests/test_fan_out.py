@@ -1,0 +1,165 @@
+"""The fan-out: frames serialized once, written per client in one write, drivers first.
+
+Real pymunk robot and bridge, real websockets framing; the last test drives a real server
+over real sockets with a client that closes a loop among many that only watch.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+
+import pytest
+from websockets.asyncio.client import connect
+from websockets.frames import Frame as WebSocketFrame
+from websockets.frames import Opcode
+from websockets.streams import StreamReader
+
+from physics import Simulation, load_world
+from ros_nodes.rosbridge.bridge import Bridge, Session
+from ros_nodes.rosbridge.outbox import Outbox
+from ros_nodes.rosbridge.robot_endpoint import RobotEndpoint
+from ros_nodes.rosbridge.server import SimServer, start_websocket
+from ros_nodes.rosbridge.wire import WireFrames, serialize
+from ros_nodes.virtual_robot_core import VirtualRobot
+
+TWIST = {"linear": {"x": 0.1, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
+
+
+def parse_frame(data: bytes) -> WebSocketFrame:
+    """Parse ``data`` as one frame, the way a websockets client reads it."""
+    reader = StreamReader()
+    reader.feed_data(data)
+    reader.feed_eof()
+    parser = WebSocketFrame.parse(reader.read_exact, mask=False)
+    try:
+        next(parser)
+    except StopIteration as done:
+        return done.value
+    raise AssertionError("the frame was incomplete")
+
+
+@pytest.mark.parametrize("size", [0, 125, 126, 65535, 65536, 300_000])
+def test_serialized_text_frames_parse_back_at_every_length_encoding(size: int) -> None:
+    text = "é" * (size // 2) + "x" * (size % 2)  # multi-byte UTF-8: bytes, not characters
+    frame = parse_frame(serialize(text))
+    assert frame.opcode is Opcode.TEXT and frame.fin
+    assert frame.data.decode() == text
+
+
+def test_binary_frames_stay_binary() -> None:
+    frame = parse_frame(serialize(b"\x00\xff" * 100))
+    assert frame.opcode is Opcode.BINARY and frame.data == b"\x00\xff" * 100
+
+
+def test_the_memo_frames_a_message_once_and_stays_within_its_budget() -> None:
+    memo = WireFrames(max_bytes=10_000)
+    message = "x" * 1000
+    first = memo.of(message)
+    assert memo.of(message) is first  # the same bytes object: not framed again
+    for index in range(30):  # 30 KB of other messages through a 10 KB memo
+        memo.of(f"{index:04d}" + "y" * 996)
+        assert memo.held_bytes <= 10_000
+    assert memo.of(message) == first  # dropped and framed again, identically
+
+
+def test_take_gives_the_pop_order_and_respects_its_budget() -> None:
+    def filled() -> Outbox:
+        outbox = Outbox()
+        outbox.put_topic("/a", "a1", 5)
+        outbox.put_reply("r1")
+        outbox.put_topic("/b", "b1", 5)
+        outbox.put_topic("/a", "a2", 5)
+        outbox.put_reply("r2")
+        return outbox
+
+    popped = filled()
+    order = []
+    while (frame := popped.pop()) is not None:
+        order.append(frame)
+    assert order == ["r1", "r2", "a1", "b1", "a2"]
+    everything = filled()
+    assert everything.take(1000) == order
+    assert everything.queued_bytes == 0 and len(everything) == 0 and everything.pop() is None
+    part = filled()
+    assert part.take(5) == ["r1", "r2", "a1"]  # at most about the budget, in order
+    assert part.take(1000) == ["b1", "a2"]
+
+
+def test_a_client_that_drives_gets_its_odom_before_it_is_queued_for_watchers() -> None:
+    robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
+    bridge = Bridge()
+    RobotEndpoint(bridge, robot)
+    seen_by_driver: list[int] = []
+    watchers = [Session(f"watcher-{i}", False, Outbox()) for i in range(20)]
+
+    def driver_sends() -> None:  # what the driver's connection writes, and when
+        if len(driver.outbox) and not seen_by_driver:
+            seen_by_driver.append(sum(len(watcher.outbox) for watcher in watchers))
+
+    driver = Session("driver", False, Outbox(send=driver_sends))
+    for session in [*watchers[:10], driver, *watchers[10:]]:
+        bridge.connect(session)
+        bridge.handle(session, json.dumps({"op": "subscribe", "topic": "/odom"}))
+    bridge.handle(driver, json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": TWIST}))
+    for spec, msg in robot.step():
+        bridge.publish(spec.name, msg)
+    assert seen_by_driver == [0]  # written while no watcher had it queued yet
+    assert all(len(watcher.outbox) == 1 for watcher in watchers)
+    assert len(driver.outbox) == 1  # (the test's send callback does not take it)
+
+
+def test_a_watcher_is_not_served_first() -> None:
+    robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
+    bridge = Bridge()
+    RobotEndpoint(bridge, robot)
+    sent: list[str] = []
+    sessions = [Session(f"c{i}", False, Outbox(send=lambda i=i: sent.append(f"c{i}")))
+                for i in range(3)]
+    for session in sessions:
+        bridge.connect(session)
+        bridge.handle(session, json.dumps({"op": "subscribe", "topic": "/odom"}))
+    for spec, msg in robot.step():
+        bridge.publish(spec.name, msg)
+    assert sent == []  # nobody drives: every frame waits for the tick's one write
+
+
+def test_many_watchers_and_one_driver_over_real_sockets() -> None:
+    """Every watcher gets every /odom in order, in whole frames; the driver's commands show."""
+    async def scenario() -> None:
+        server = SimServer(VirtualRobot(Simulation(load_world("empty"), seed=0)), "t")
+        listening = await start_websocket(server, "127.0.0.1", 0)
+        port = listening.sockets[0].getsockname()[1]
+        ticks = asyncio.create_task(server.run_ticks())
+        url = f"ws://127.0.0.1:{port}/"
+        try:
+            watchers = [await connect(url, compression=None) for _ in range(30)]
+            driver = await connect(url, compression=None)
+            for connection in [*watchers, driver]:
+                await connection.send(json.dumps({"op": "subscribe", "topic": "/odom"}))
+            await driver.send(json.dumps({"op": "advertise", "topic": "/cmd_vel",
+                                          "type": "geometry_msgs/msg/Twist"}))
+            speeds = []
+            deadline = time.monotonic() + 10.0
+            while time.monotonic() < deadline and len(speeds) < 10:
+                await driver.send(json.dumps({"op": "publish", "topic": "/cmd_vel",
+                                              "msg": TWIST}))
+                message = json.loads(await asyncio.wait_for(driver.recv(), 5.0))
+                speeds.append(message["msg"]["twist"]["twist"]["linear"]["x"])
+            assert speeds[-1] == pytest.approx(0.1)
+            for watcher in watchers:
+                stamps = []
+                for _ in range(5):
+                    message = json.loads(await asyncio.wait_for(watcher.recv(), 5.0))
+                    stamp = message["msg"]["header"]["stamp"]
+                    stamps.append(stamp["sec"] + 1e-9 * stamp["nanosec"])
+                assert stamps == sorted(stamps) and len(set(stamps)) == 5
+            for connection in [*watchers, driver]:
+                await connection.close()
+        finally:
+            ticks.cancel()
+            listening.close()
+            await listening.wait_closed()
+
+    asyncio.run(scenario())
