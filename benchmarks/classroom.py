@@ -57,11 +57,15 @@ import concurrent.futures
 import contextlib
 import dataclasses
 import json
+import os
 import random
+import shutil
+import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+import urllib.request
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -80,6 +84,7 @@ from bench_server import (
     Server,
     cpu_seconds,
     expected_frames,
+    free_port,
     percentile,
     running_server,
     sample_rss,
@@ -90,7 +95,9 @@ from bench_server import (
 )
 from load import Commands
 
+from ros_nodes.rosbridge.classroom import numbered_roster
 from ros_nodes.topics import ODOM
+from websim.nginx_config import Worker, nginx_config
 
 PUBLISH_PERIOD_S = 0.1
 """Each driver publishes /cmd_vel at 10 Hz on average."""
@@ -236,8 +243,8 @@ async def open_connection(url: str) -> ClientConnection:
                          open_timeout=CONNECT_TIMEOUT_S, max_size=None)
 
 
-async def root_view(ws_port: int, names: Sequence[str]) -> ClientConnection | None:
-    """The instructor's root connection if the server has one that lists ``names``."""
+async def root_view(ws_port: int) -> tuple[ClientConnection, list[str]] | None:
+    """The instructor's root connection and the robots it lists, if the server has one."""
     try:
         connection = await open_connection(f"ws://{HOST}:{ws_port}/?token={ADMIN_TOKEN}")
     except (InvalidHandshake, OSError):
@@ -249,9 +256,8 @@ async def root_view(ws_port: int, names: Sequence[str]) -> ClientConnection | No
         while time.monotonic() < deadline:
             reply = json.loads(await asyncio.wait_for(connection.recv(), 3.0))
             if reply.get("op") == "service_response" and reply.get("id") == "robots":
-                listed = reply.get("values", {}).get("names", []) if reply.get("result") else []
-                if set(names) <= set(listed):
-                    return connection
+                if reply.get("result"):
+                    return connection, list(reply.get("values", {}).get("names", []))
                 break
     except (ConnectionClosed, TimeoutError, ValueError, AttributeError):
         pass
@@ -259,19 +265,42 @@ async def root_view(ws_port: int, names: Sequence[str]) -> ClientConnection | No
     return None
 
 
-async def class_dashboard(server: Server, names: Sequence[str]) -> Dashboard:
-    """The root view subscribing every ``/NAME/odom``, else one admin connection per robot."""
-    root = await root_view(server.ws_port, names)
-    if root is None:
-        return await per_robot_dashboard(
-            [f"ws://{HOST}:{server.ws_port}/robots/{name}?token={ADMIN_TOKEN}"
-             for name in names], names, "one admin connection per robot (no root view)")
+async def subscribe_robots(root: ClientConnection, names: Sequence[str]) -> dict[str, str]:
+    """Subscribe ``root`` to every ``/NAME/odom``, paced under the rate limit."""
     for index, name in enumerate(names):
         await root.send(dashboard_subscribe(f"/{name}/odom"))
         if index % 10 == 9:
             await asyncio.sleep(10 / SUBSCRIBES_PER_S)
-    return Dashboard([(root, {f"/{name}/odom": name for name in names})],
+    return {f"/{name}/odom": name for name in names}
+
+
+async def class_dashboard(server: Server, names: Sequence[str]) -> Dashboard:
+    """The root view subscribing every ``/NAME/odom``, else one admin connection per robot."""
+    root = await root_view(server.ws_port)
+    if root is None or not set(names) <= set(root[1]):
+        if root is not None:
+            await root[0].close()
+        return await per_robot_dashboard(
+            [f"ws://{HOST}:{server.ws_port}/robots/{name}?token={ADMIN_TOKEN}"
+             for name in names], names, "one admin connection per robot (no root view)")
+    return Dashboard([(root[0], await subscribe_robots(root[0], names))],
                      "root view, /NAME/odom")
+
+
+async def workers_dashboard(servers: Sequence[Server], names: Sequence[str]) -> Dashboard:
+    """Each worker's root view, subscribing the robots that live there."""
+    connections = []
+    for server in servers:
+        root = await root_view(server.ws_port)
+        if root is None:
+            raise RuntimeError(f"worker on port {server.ws_port} has no root view")
+        connection, listed = root
+        connections.append((connection, await subscribe_robots(
+            connection, [name for name in names if name in listed])))
+    covered = {name for _, topics in connections for name in topics.values()}
+    if covered != set(names):
+        raise RuntimeError(f"{len(set(names) - covered)} robots are on no worker's root view")
+    return Dashboard(connections, "each worker's root view")
 
 
 async def per_robot_dashboard(urls: Sequence[str], names: Sequence[str],
@@ -294,6 +323,7 @@ class Setup:
         names: the robots, in client order.
         urls: each robot's client URL.
         robot_health: reads every robot's /healthz report, in ``names`` order (blocking).
+        proxy_pids: processes in front of the servers (nginx).
     """
 
     kind: str
@@ -301,6 +331,8 @@ class Setup:
     names: list[str]
     urls: list[str]
     robot_health: Callable[[], list[dict[str, Any]]]
+    proxy_pids: list[int] = dataclasses.field(default_factory=list)
+    """Processes in front of the servers (nginx): their CPU counts as the server's."""
 
 
 def class_setup(server: Server) -> Setup:
@@ -313,6 +345,59 @@ def class_setup(server: Server) -> Setup:
 
     return Setup("one process", [server], names,
                  [f"ws://{HOST}:{server.ws_port}/robots/{name}" for name in names], health)
+
+
+def workers_setup(workers: list[Server], nginx_ws_port: int, n_robots: int) -> Setup:
+    """``websim serve --class N --worker`` processes behind nginx at ``nginx_ws_port``."""
+    names = [student.name for student in numbered_roster(n_robots)]
+
+    def health() -> list[dict[str, Any]]:
+        robots: dict[str, dict[str, Any]] = {}
+        for worker in workers:
+            robots.update(worker.health(timeout_s=5.0)["robots"])
+        return [robots[name] for name in names]
+
+    return Setup(f"{len(workers)} workers behind nginx", workers, names,
+                 [f"ws://{HOST}:{nginx_ws_port}/robots/{name}" for name in names], health)
+
+
+@contextlib.contextmanager
+def running_nginx(directory: Path, workers: Sequence[Server], http_port: int,
+                  ws_port: int) -> Iterator[subprocess.Popen[bytes]]:
+    """The real nginx, configured by ``websim nginx-config``, in front of ``workers``."""
+    nginx = shutil.which("nginx") or "/usr/sbin/nginx"
+    if not Path(nginx).exists():
+        raise RuntimeError("nginx is not installed (apt-get install nginx)")
+    directory.mkdir(parents=True, exist_ok=True)
+    conf = nginx_config([Worker(HOST, w.http_port, w.ws_port) for w in workers],
+                        f"{HOST}:{http_port}", f"{HOST}:{ws_port}")
+    temp = "".join(f"    {kind}_temp_path {directory / kind};\n"
+                   for kind in ("client_body", "proxy", "fastcgi", "uwsgi", "scgi"))
+    conf = conf.replace("http {\n", "http {\n" + temp, 1).replace(
+        "worker_processes auto;", f"worker_processes 1;\nerror_log {directory}/error.log;")
+    path = directory / "nginx.conf"
+    path.write_text(conf)
+    directives = f"daemon off; pid {directory / 'nginx.pid'};"
+    if os.geteuid() == 0:
+        directives += " user root;"
+    process = subprocess.Popen([nginx, "-p", str(directory), "-c", str(path), "-g", directives],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 10.0
+        while True:
+            try:
+                with urllib.request.urlopen(f"http://{HOST}:{http_port}/healthz", timeout=2):
+                    break
+            except OSError:
+                if process.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError("nginx did not start: " + (
+                        (directory / "error.log").read_text()[-500:]
+                        if (directory / "error.log").exists() else "no log")) from None
+                time.sleep(0.1)
+        yield process
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
 
 
 def separate_setup(servers: list[Server]) -> Setup:
@@ -356,6 +441,8 @@ async def measure(setup: Setup, seconds: float, warmup_s: float) -> dict[str, An
                   for index, (client, driver) in enumerate(zip(clients, drivers, strict=True))]
         if setup.kind == "one process":
             dashboard = await class_dashboard(setup.servers[0], setup.names)
+        elif setup.kind.endswith("behind nginx"):
+            dashboard = await workers_dashboard(setup.servers, setup.names)
         else:
             dashboard = await per_robot_dashboard(
                 [f"{url}?token={ADMIN_TOKEN}" for url in setup.urls], setup.names,
@@ -383,6 +470,8 @@ async def window(setup: Setup, clients: list[Client], drivers: list[Driver],
                  dashboard: Dashboard, seconds: float) -> dict[str, Any]:
     """Measure ``seconds`` of the running load."""
     processes = [psutil.Process(server.process.pid) for server in setup.servers]
+    proxies = [psutil.Process(pid) for pid in setup.proxy_pids]
+    proxies += [child for proxy in proxies for child in proxy.children(recursive=True)]
     this_process = psutil.Process()
     peaks = [[0] for _ in processes]
     samplers = [asyncio.create_task(sample_rss(process, peak))
@@ -390,7 +479,8 @@ async def window(setup: Setup, clients: list[Client], drivers: list[Driver],
     before = await asyncio.to_thread(setup.robot_health)
     counts_before = [client.snapshot() for client in clients]
     board_before = dict(dashboard.counts)
-    cpu_before = sum(cpu_seconds(process) for process in processes), cpu_seconds(this_process)
+    cpu_before = (sum(cpu_seconds(process) for process in processes + proxies),
+                  cpu_seconds(this_process))
     host_before = busy_seconds()
     superseded_before = sum(driver.superseded for driver in drivers)
     for driver in drivers:
@@ -401,7 +491,8 @@ async def window(setup: Setup, clients: list[Client], drivers: list[Driver],
     counts_after = [client.snapshot() for client in clients]
     board_after = dict(dashboard.counts)
     elapsed_s = time.perf_counter() - start_s
-    cpu_after = sum(cpu_seconds(process) for process in processes), cpu_seconds(this_process)
+    cpu_after = (sum(cpu_seconds(process) for process in processes + proxies),
+                 cpu_seconds(this_process))
     host_after = busy_seconds()
     end_s = time.perf_counter()
     for sampler in samplers:
@@ -454,7 +545,8 @@ async def window(setup: Setup, clients: list[Client], drivers: list[Driver],
                               / elapsed_s),
         "rss_mb": sum(peak[0] for peak in peaks) / 1e6,
         "pss_mb": pss_mb,
-        "rss_budget_mb": RSS_BASE_MB + RSS_PER_ROBOT_MB * n_robots,
+        "rss_budget_mb": RSS_BASE_MB * (len(processes) if setup.proxy_pids else 1)
+        + RSS_PER_ROBOT_MB * n_robots,
         "closed": sum(client.connection.close_code is not None for client in clients)
         + sum(connection.close_code is not None for connection, _ in dashboard.connections),
     }
@@ -539,7 +631,7 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
 
 
 def run_setup(kind: str, n_robots: int, seconds: float, warmup_s: float,
-              log_dir: Path) -> dict[str, Any]:
+              log_dir: Path, workers: int = 2) -> dict[str, Any]:
     """Start the servers of one setup, measure, stop them; a failure is a row with ``error``."""
     budget_s = 2 * CONNECT_TIMEOUT_S + warmup_s + seconds + 30.0
     with contextlib.ExitStack() as stack:
@@ -547,6 +639,18 @@ def run_setup(kind: str, n_robots: int, seconds: float, warmup_s: float,
             if kind == "one process":
                 server = stack.enter_context(running_server(log_dir, ["--class", str(n_robots)]))
                 setup = class_setup(server)
+            elif kind == "workers":
+                http_port, ws_port = free_port(), free_port()
+                args = ["--class", str(n_robots), "--worker", "--public-ws-port", str(ws_port),
+                        "--max-robots", str(n_robots)]
+                with concurrent.futures.ThreadPoolExecutor(STARTERS) as pool:
+                    starting = [pool.submit(stack.enter_context, running_server(log_dir, args))
+                                for _ in range(workers)]
+                    servers = [future.result() for future in starting]
+                nginx = stack.enter_context(running_nginx(log_dir / f"nginx-{ws_port}",
+                                                          servers, http_port, ws_port))
+                setup = workers_setup(servers, ws_port, n_robots)
+                setup.proxy_pids.append(nginx.pid)
             else:
                 with concurrent.futures.ThreadPoolExecutor(STARTERS) as pool:
                     starting = [pool.submit(stack.enter_context, running_server(log_dir))
@@ -619,6 +723,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="then double N from 40 until one process fails a target "
                         "(or halve it until it passes)")
     parser.add_argument("--search-max", type=int, default=400, help="cap of --search (400)")
+    parser.add_argument("--workers", type=int, default=0, metavar="K",
+                        help="also measure K `--worker` processes behind the real nginx "
+                             "(websim nginx-config) for every N (default 0: not)")
     parser.add_argument("--json", action="store_true", help="print rows as JSON objects")
     args = parser.parse_args(argv)
     if any(n < 1 for n in args.robots) or args.search_max < 1:
@@ -635,10 +742,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="bench-classroom-") as log_dir:
         plan = [("one process", n) for n in args.robots]
         plan += [("separate", n) for n in args.robots if n <= args.compare_max]
+        plan += [("workers", n) for n in args.robots if args.workers > 0]
         for kind, n_robots in plan:
             print(f"measuring {kind}, {n_robots} robots ...", file=sys.stderr, flush=True)
             results[kind, n_robots] = run_setup(kind, n_robots, args.seconds, args.warmup,
-                                                Path(log_dir))
+                                                Path(log_dir), args.workers)
             emit(results[kind, n_robots])
         held: int | None = None
         if args.search:
@@ -650,11 +758,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"classroom benchmark: {args.seconds:g} s window after {args.warmup:g} s warm-up; "
           f"per robot one driver (/odom /scan /tf, /cmd_vel 10 Hz) and the dashboard "
           f"(/odom at 5 Hz); {psutil.cpu_count()} CPUs")
-    for kind in ("one process", "separate"):
+    titles = {"one process": "ONE `websim serve --class N`",
+              "separate": "N separate single-robot `websim serve` processes",
+              "workers": f"{args.workers} `websim serve --class N --worker` processes behind "
+                         "the real nginx (websim nginx-config)"}
+    for kind, title in titles.items():
         rows = [row for (each, _), row in sorted(results.items()) if each == kind]
         if rows:
-            title = ("ONE `websim serve --class N`" if kind == "one process"
-                     else "N separate single-robot `websim serve` processes")
             print(f"\n{title}\n{table(rows)}")
     if args.search:
         print(f"\nsearch (from {SEARCH_START}, doubling up to {args.search_max}, or halving):"

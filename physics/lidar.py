@@ -37,6 +37,10 @@ PARALLEL_EPS = 1e-12
 """|ray x wall| below this counts as parallel: pymunk reports no hit for a zero-thickness wall
 seen edge-on, and so does the fast path."""
 
+CULL_ABOVE_SHAPES = 32
+"""Worlds of more shapes than this are culled to those within range_max (pymunk's spatial
+index); in smaller ones, asking the index costs more than intersecting every shape."""
+
 TOO_CLOSE_COURSE_M = 0.0
 """Reported for a hit closer than range_min unless REP 117 values are asked for."""
 
@@ -54,6 +58,10 @@ class Lidar:
         self._world_space = world_space
         self._beam_angles_rad: FloatArray = params.angle_min_rad + np.arange(
             params.num_rays, dtype=np.float64) * params.angle_increment_rad
+        self._beam_cos: FloatArray = np.cos(self._beam_angles_rad)
+        self._beam_sin: FloatArray = np.sin(self._beam_angles_rad)
+        self._directions_theta = math.nan
+        self._directions = (self._beam_cos, self._beam_sin)
         walls = world_space.wall_shapes
         self._wall_index: dict[pymunk.Shape, int] = {s: i for i, s in enumerate(walls)}
         self._wall_a = np.array([tuple(s.a) for s in walls], dtype=float).reshape(-1, 2)
@@ -63,6 +71,8 @@ class Lidar:
         self._circle_centre = np.array([tuple(s.offset) for s in circles],
                                        dtype=float).reshape(-1, 2)
         self._circle_radius = np.array([s.radius for s in circles], dtype=float)
+        self._all_walls = np.arange(len(walls), dtype=np.intp)
+        self._all_circles = np.arange(len(circles), dtype=np.intp)
 
     @property
     def params(self) -> LidarParams:
@@ -83,8 +93,13 @@ class Lidar:
                       robot_pose.theta + p.mount_yaw_rad)
 
     def _world_directions(self, laser: Pose2D) -> tuple[FloatArray, FloatArray]:
-        angles = laser.theta + self._beam_angles_rad
-        return np.cos(angles), np.sin(angles)
+        """Each beam's direction in the map frame: its laser-frame direction, rotated."""
+        if laser.theta != self._directions_theta:
+            cos_t, sin_t = math.cos(laser.theta), math.sin(laser.theta)
+            self._directions = (cos_t * self._beam_cos - sin_t * self._beam_sin,
+                                sin_t * self._beam_cos + cos_t * self._beam_sin)
+            self._directions_theta = laser.theta
+        return self._directions
 
     def raw_ranges_reference(self, robot_pose: Pose2D) -> FloatArray:
         """Distance to the first shape along each beam, +inf if none within range_max (m).
@@ -106,13 +121,29 @@ class Lidar:
     def raw_ranges(self, robot_pose: Pose2D) -> FloatArray:
         """Distance to the first shape along each beam, +inf if none within range_max (m).
 
-        Culls shapes with pymunk's spatial index, then intersects all beams with the remaining
-        walls and circles in numpy.
+        In a world of more than ``CULL_ABOVE_SHAPES`` shapes, culls them with pymunk's spatial
+        index first; then intersects all beams with the remaining walls and circles in numpy.
         """
         laser = self.laser_pose(robot_pose)
         range_max = self._params.range_max_m
         dir_x, dir_y = self._world_directions(laser)
-        ranges = np.full(self._params.num_rays, np.inf)
+        walls, circles = self._shapes_within(laser, range_max)
+        ranges: FloatArray | None = None
+        if len(walls):
+            ranges = self._hit_walls(laser, dir_x, dir_y, walls)
+        if len(circles):
+            hits = self._hit_circles(laser, dir_x, dir_y, circles)
+            ranges = hits if ranges is None else np.minimum(ranges, hits)
+        if ranges is None:
+            return np.full(self._params.num_rays, np.inf)
+        ranges[ranges > range_max] = np.inf
+        return ranges
+
+    def _shapes_within(self, laser: Pose2D,
+                       range_max: float) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+        """Indices of the walls and circles a beam may reach: all of them in a small world."""
+        if len(self._wall_index) + len(self._circle_index) <= CULL_ABOVE_SHAPES:
+            return self._all_walls, self._all_circles
         reach = pymunk.BB(laser.x - range_max, laser.y - range_max,
                           laser.x + range_max, laser.y + range_max)
         walls: list[int] = []
@@ -122,52 +153,54 @@ class Lidar:
                 walls.append(self._wall_index[shape])
             else:
                 circles.append(self._circle_index[shape])
-        if walls:
-            ranges = np.minimum(ranges, self._hit_walls(laser, dir_x, dir_y, walls))
-        if circles:
-            ranges = np.minimum(ranges, self._hit_circles(laser, dir_x, dir_y, circles))
-        ranges[ranges > range_max] = np.inf
-        return ranges
+        return np.array(walls, dtype=np.intp), np.array(circles, dtype=np.intp)
 
     def _hit_walls(self, laser: Pose2D, dir_x: FloatArray, dir_y: FloatArray,
-                   indices: list[int]) -> FloatArray:
-        """Ray-segment distances: ray o + t*d meets wall a + s*(b - a) at 0 <= s <= 1, t >= 0.
+                   indices: npt.NDArray[np.intp]) -> FloatArray:
+        """Ray-segment distances: ray o + t*d meets wall a..b at t >= 0, a and b either side.
 
-        With e = b - a and w = a - o: t = (w x e) / (d x e) and s = (w x d) / (d x e). Both
-        numerators over the beams, d x e and w x d, come from one matrix product.
+        With e = b - a and w = a - o: t = (w x e) / (d x e); a and b lie either side of the
+        ray (or on it) when d x w and d x (b - o) differ in sign. The three cross products over
+        the beams come from one matrix product. A ray (nearly) along its wall meets it nowhere,
+        as pymunk reports for a wall seen edge-on. Arrays are laid out wall by beam, so the
+        nearest wall per beam is a fast reduction over rows.
         """
         a = self._wall_a[indices]
-        edge = self._wall_b[indices] - a
-        to_a = a - (laser.x, laser.y)
+        b = self._wall_b[indices]
+        origin = (laser.x, laser.y)
+        to_a = a - origin
+        to_b = b - origin
+        edge = b - a
         count = len(indices)
-        columns = np.empty((2, 2 * count))
-        columns[0, :count], columns[1, :count] = edge[:, 1], -edge[:, 0]
-        columns[0, count:], columns[1, count:] = -to_a[:, 1], to_a[:, 0]
-        products = np.stack((dir_x, dir_y), axis=1) @ columns
-        denom, s_num = products[:, :count], products[:, count:]
-        t_num = to_a[:, 0] * edge[:, 1] - to_a[:, 1] * edge[:, 0]
+        rows = np.empty((3 * count, 2))
+        rows[:count, 0], rows[:count, 1] = edge[:, 1], -edge[:, 0]  # d x e
+        rows[count:2 * count, 0], rows[count:2 * count, 1] = to_a[:, 1], -to_a[:, 0]  # d x w
+        rows[2 * count:, 0], rows[2 * count:, 1] = to_b[:, 1], -to_b[:, 0]
+        products = rows @ np.stack((dir_x, dir_y))
+        denom = products[:count]
+        t_num = (to_a[:, 0] * edge[:, 1] - to_a[:, 1] * edge[:, 0])[:, None]
         with np.errstate(divide="ignore", invalid="ignore"):
-            inverse = 1.0 / denom
-            t = t_num * inverse
-            s = s_num * inverse
-        valid = (np.abs(denom) >= PARALLEL_EPS) & (t >= 0.0) & (s >= 0.0) & (s <= 1.0)
-        return np.where(valid, t, np.inf).min(axis=1)  # type: ignore[no-any-return]
+            t = t_num / denom
+        missed = (products[count:2 * count] * products[2 * count:] > 0.0) | ~(t >= 0.0) | \
+            (np.abs(denom) < PARALLEL_EPS)
+        t[missed] = np.inf
+        return t.min(axis=0)  # type: ignore[no-any-return]
 
     def _hit_circles(self, laser: Pose2D, dir_x: FloatArray, dir_y: FloatArray,
-                     indices: list[int]) -> FloatArray:
+                     indices: npt.NDArray[np.intp]) -> FloatArray:
         """Ray-disc distances; a laser inside a disc reads 0, as pymunk reports it."""
         centre = self._circle_centre[indices]
         radius = self._circle_radius[indices]
-        to_c_x = centre[:, 0] - laser.x
-        to_c_y = centre[:, 1] - laser.y
-        along = dir_x[:, None] * to_c_x + dir_y[:, None] * to_c_y
-        outside = to_c_x**2 + to_c_y**2 - radius**2
+        to_c_x = (centre[:, 0] - laser.x)[:, None]
+        to_c_y = (centre[:, 1] - laser.y)[:, None]
+        along = to_c_x * dir_x + to_c_y * dir_y
+        outside = to_c_x**2 + to_c_y**2 - radius[:, None]**2
         disc = along**2 - outside
         t = along - np.sqrt(np.maximum(disc, 0.0))
         inside = outside <= 0.0
         t = np.where(inside, 0.0, t)
         valid = inside | ((disc >= 0.0) & (t >= 0.0))
-        return np.where(valid, t, np.inf).min(axis=1)  # type: ignore[no-any-return]
+        return np.where(valid, t, np.inf).min(axis=0)  # type: ignore[no-any-return]
 
     def finish(self, raw_ranges_m: FloatArray, rng: np.random.Generator | None,
                sigma_m: float) -> FloatArray:

@@ -163,3 +163,24 @@ def test_many_watchers_and_one_driver_over_real_sockets() -> None:
             await listening.wait_closed()
 
     asyncio.run(scenario())
+
+
+def test_a_driver_gets_all_of_its_tick_in_one_write() -> None:
+    robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
+    bridge = Bridge()
+    RobotEndpoint(bridge, robot)
+    writes: list[int] = []
+    driver = Session("driver", False, Outbox(send=lambda: writes.append(len(driver.outbox))))
+    bridge.connect(driver)
+    for topic in ("/odom", "/tf", "/scan"):
+        bridge.handle(driver, json.dumps({"op": "subscribe", "topic": topic}))
+    bridge.handle(driver, json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": TWIST}))
+    writes.clear()
+    published = []
+    for _ in range(2):  # /scan comes every second tick
+        messages = [(spec.name, msg) for spec, msg in robot.step(scan=True)]
+        published.append(sum(name in ("/odom", "/tf", "/scan") for name, _ in messages))
+        bridge.publish_many(messages)
+        driver.outbox.take(1 << 20)  # what the connection's write takes
+    assert sorted(published) == [2, 3]
+    assert writes == published  # each tick's /odom, /tf (and /scan): one write

@@ -79,6 +79,10 @@ class Bridge:
         """Send an in-process message (the robot's, the graph's) to ``topic``'s subscribers."""
         self.topics.publish(topic, msg, latch)
 
+    def publish_many(self, messages: list[tuple[str, Any]]) -> None:
+        """Send one tick's in-process messages; each client gets its share in one write."""
+        self.topics.publish_many(messages)
+
     def topic_types(self) -> dict[str, str]:
         """Every known topic and its type: the robot's, the clients' and the ROS graph's."""
         return {**self.graph.topic_types(), **self.topics.types()}

@@ -39,6 +39,11 @@ SPREAD = 0.8
 """Share of the tick period the robots' ticks are spread over (the last robot steps 40 ms
 after the first at 20 Hz, leaving the rest of the period for the frames to go out)."""
 
+SLOTS = 10
+"""The spread's slots per period: robots are ticked in up to this many groups, one group every
+``SPREAD / SLOTS`` of the period (4 ms at 20 Hz). A robot's frames go out after its group, not
+after the whole class; and the event loop wakes ten times a tick, not once per robot."""
+
 TOKEN_BYTES = 12
 """Random bytes of a generated robot token (16 URL-safe characters)."""
 
@@ -201,10 +206,10 @@ class Classroom:
     async def run_ticks(self) -> None:
         """Tick every robot on the one schedule, forever (each robot's faults stay its own).
 
-        The robots' ticks are spread over ``SPREAD`` of the period, each robot at its own
-        offset: robot k's frames go out right after its own step instead of waiting for every
-        other robot's, so its latency does not grow with the class, and the work of a tick
-        does not arrive on the event loop all at once.
+        The robots' ticks are spread over ``SPREAD`` of the period in up to ``SLOTS``
+        groups, each group at its own offset: a robot's frames go out right after its group's
+        steps instead of waiting for every other robot's, so its latency does not grow with
+        the class, and the work of a tick does not arrive on the event loop all at once.
         """
         await self.schedule.run(self._tick_all)
 
@@ -214,13 +219,16 @@ class Classroom:
             return
         loop = asyncio.get_running_loop()
         now = loop.time()
-        slot_s = SPREAD * self.schedule.period_s / len(hosts)
-        hosts[0].tick(lateness_s)
-        for index, host in enumerate(hosts[1:], start=1):
+        slots = min(SLOTS, len(hosts))
+        slot_s = SPREAD * self.schedule.period_s / slots
+        groups = [hosts[index::slots] for index in range(slots)]
+        self._tick_group(groups[0], now, lateness_s)
+        for index, group in enumerate(groups[1:], start=1):
             due_s = now + index * slot_s
-            loop.call_at(due_s, self._tick_one, host, due_s, lateness_s)
+            loop.call_at(due_s, self._tick_group, group, due_s, lateness_s)
 
     @staticmethod
-    def _tick_one(host: RobotHost, due_s: float, lateness_s: float) -> None:
-        late_s = asyncio.get_running_loop().time() - due_s
-        host.tick(lateness_s + max(0.0, late_s))
+    def _tick_group(hosts: list[RobotHost], due_s: float, lateness_s: float) -> None:
+        late_s = max(0.0, asyncio.get_running_loop().time() - due_s)
+        for host in hosts:
+            host.tick(lateness_s + late_s)

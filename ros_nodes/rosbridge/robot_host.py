@@ -199,17 +199,18 @@ class RobotHost:
             return
         self.stats.ticks += 1
         self.stats.lateness_s.append(lateness_s)
-        publications = self._step()
-        for spec, msg in publications:
+        messages = []
+        for spec, msg in self._step():
             if spec is SCAN:
                 self.stats.scans_cast += 1
-            if spec is SCAN and lateness_s > SHED_SCANS_AFTER_S:
-                self.stats.scans_shed += 1
-                continue
-            try:
-                self.bridge.publish(spec.name, msg)
-            except Exception as error:  # the robot's boundary: record, go on
-                self.faults.record(f"delivering {spec.name}", error)
+                if lateness_s > SHED_SCANS_AFTER_S:
+                    self.stats.scans_shed += 1
+                    continue
+            messages.append((spec.name, msg))
+        try:
+            self.bridge.publish_many(messages)
+        except Exception as error:  # the robot's boundary: record, go on
+            self.faults.record(f"delivering {', '.join(name for name, _ in messages)}", error)
         try:
             self.bridge.services.expire()
         except Exception as error:

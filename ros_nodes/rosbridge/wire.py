@@ -6,9 +6,9 @@ same bytes on every connection: one /odom that 500 clients subscribe to is frame
 ``str`` (JSON), binary frames ``bytes`` (CBOR), as in the outbox.
 
 ``WireFrames`` keeps the frames of recent messages, bounded in bytes: a frame is looked up
-by the message object itself (a topic's subscribers share it; Python caches a string's hash),
-and the whole memo is dropped when it would exceed its budget, so a client that is behind at
-worst makes its frame be serialized once more.
+by the identity of the message object (a topic's subscribers share it; no hashing of its
+text), and the whole memo is dropped when it would exceed its budget, so a client that is
+behind at worst makes its frame be serialized once more.
 """
 
 from __future__ import annotations
@@ -19,7 +19,8 @@ from websockets.frames import Opcode
 from ros_nodes.rosbridge.outbox import Frame
 
 WIRE_MEMO_BYTES = 8 << 20
-"""Most bytes of serialized frames kept for reuse (a tick of 100 robots is about 1.2 MB)."""
+"""Most bytes of serialized frames kept for reuse (a tick of 100 robots is about 1.2 MB); the
+messages they frame are held with them, as large again."""
 
 
 def serialize(frame: Frame) -> bytes:
@@ -38,19 +39,20 @@ class WireFrames:
 
     def __init__(self, max_bytes: int = WIRE_MEMO_BYTES) -> None:
         self._max_bytes = max_bytes
-        self._frames: dict[Frame, bytes] = {}
+        self._frames: dict[int, tuple[Frame, bytes]] = {}
         self._bytes = 0
 
     def of(self, frame: Frame) -> bytes:
         """``frame`` serialized (from the memo when the same message was framed before)."""
-        wire = self._frames.get(frame)
-        if wire is None:
-            wire = serialize(frame)
-            if self._bytes + len(wire) > self._max_bytes:
-                self._frames.clear()
-                self._bytes = 0
-            self._frames[frame] = wire
-            self._bytes += len(wire)
+        entry = self._frames.get(id(frame))
+        if entry is not None and entry[0] is frame:
+            return entry[1]
+        wire = serialize(frame)
+        if self._bytes + len(wire) > self._max_bytes:
+            self._frames.clear()
+            self._bytes = 0
+        self._frames[id(frame)] = (frame, wire)  # the frame held: its id is not reused
+        self._bytes += len(wire)
         return wire
 
     def __len__(self) -> int:

@@ -47,6 +47,7 @@ class Encoded:
     """One publish envelope, encoded at most once per format whatever the subscriber count."""
 
     def __init__(self, topic: str, msg: Any) -> None:
+        self.topic = topic
         self.envelope = {"op": "publish", "topic": topic, "msg": msg}
         self._json: str | None = None
         self._cbor: bytes | None = None
@@ -105,7 +106,14 @@ class Topics:
         encoded = Encoded(topic, msg)
         if latch:
             self._latched[topic] = encoded
-        self._deliver(topic, encoded)
+        self._deliver([encoded])
+
+    def publish_many(self, messages: list[tuple[str, Any]]) -> None:
+        """Send several in-process messages (one tick's) to their clients, not latched.
+
+        A client gets all of its messages of the tick in one write.
+        """
+        self._deliver([Encoded(topic, msg) for topic, msg in messages])
 
     def has_subscribers(self, topic: str) -> bool:
         """Whether any client subscribes to ``topic``."""
@@ -211,28 +219,44 @@ class Topics:
         encoded = Encoded(topic, msg)
         if latch:
             self._latched[topic] = encoded
-        self._deliver(topic, encoded)
+        self._deliver([encoded])
         self._bridge.graph.publish(session, topic, type_name, msg)
 
-    def _deliver(self, topic: str, encoded: Encoded) -> None:
-        subscribers = self._subscribers.get(topic)
-        if not subscribers:
-            return
-        now = self._bridge.clock()
-        closing_loops = self._closing_loops(subscribers, now)
-        for session in closing_loops:
-            if not self._queue(session, topic, encoded, now):
-                return
-            session.outbox.send_now()
-        for session in subscribers:
-            if session not in closing_loops and not self._queue(session, topic, encoded, now):
-                return
+    def _deliver(self, messages: list[Encoded]) -> None:
+        """Queue ``messages`` (one tick's, or one client's publish) for their subscribers.
 
-    def _queue(self, session: Session, topic: str, encoded: Encoded, now: float) -> bool:
+        Clients closing a loop get all of them first, in one write (``send_now``); then the
+        clients that only watch, whose writes wait for the end of the tick.
+        """
+        now = self._bridge.clock()
+        audiences = [(encoded, subscribers) for encoded in messages
+                     if (subscribers := self._subscribers.get(encoded.topic))]
+        if not audiences:
+            return
+        closing_loops = self._closing_loops(now)
+        unencodable: set[str] = set()
+        for session in closing_loops:
+            subscribed = False
+            for encoded, subscribers in audiences:
+                if session in subscribers and encoded.topic not in unencodable:
+                    subscribed = True
+                    if not self._queue(session, encoded, now):
+                        unencodable.add(encoded.topic)
+            if subscribed:
+                session.outbox.send_now()
+        for encoded, subscribers in audiences:
+            if encoded.topic in unencodable:
+                continue
+            for session in subscribers:
+                if session not in closing_loops and not self._queue(session, encoded, now):
+                    break
+
+    def _queue(self, session: Session, encoded: Encoded, now: float) -> bool:
         """Queue ``encoded`` for ``session`` unless its throttle holds it back.
 
         False: the message cannot be encoded at all (recorded; nobody gets it).
         """
+        topic = encoded.topic
         subscription = session.subscriptions[topic]
         throttle_ms = subscription.throttle_in_force_ms
         if throttle_ms > 0 and now - subscription.last_sent_s < \
@@ -250,15 +274,15 @@ class Topics:
             self._bridge.faults.record(f"delivering {topic}", error)
         return True
 
-    def _closing_loops(self, subscribers: set[Session], now: float) -> dict[Session, None]:
-        """The ``subscribers`` that published within ``CLOSING_LOOP_S`` (in order)."""
+    def _closing_loops(self, now: float) -> dict[Session, None]:
+        """The clients that published within ``CLOSING_LOOP_S``, in order."""
         if not self._published_s:
             return {}
         stale = [session for session, published_s in self._published_s.items()
                  if now - published_s > CLOSING_LOOP_S]
         for session in stale:
             del self._published_s[session]
-        return {session: None for session in self._published_s if session in subscribers}
+        return dict.fromkeys(self._published_s)
 
     # ---- subscribe ------------------------------------------------------------------------
 
