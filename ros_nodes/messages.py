@@ -10,6 +10,7 @@ sends them.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -99,12 +100,18 @@ def yaw_quaternion(theta: float) -> Message:
     return {"x": 0.0, "y": 0.0, "z": math.sin(theta / 2.0), "w": math.cos(theta / 2.0)}
 
 
-def diagonal_covariance(diagonal: Sequence[float]) -> list[float]:
+def diagonal_covariance(diagonal: tuple[float, ...]) -> list[float]:
     """A row-major 6 x 6 covariance with ``diagonal`` on its diagonal."""
+    return list(_diagonal_matrix(diagonal))
+
+
+@functools.lru_cache(maxsize=64)
+def _diagonal_matrix(diagonal: tuple[float, ...]) -> tuple[float, ...]:
+    """Built once per diagonal: the same few diagonals come every tick."""
     matrix = [0.0] * 36
     for index, value in enumerate(diagonal):
         matrix[index * 7] = value
-    return matrix
+    return tuple(matrix)
 
 
 def odometry_msg(odom: Odometry, time_s: float, frame_id: str,

@@ -7,7 +7,7 @@ publishes, at which tick and with which stamp, is decided in one place.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Container
 from typing import Any
 
 from physics import Simulation
@@ -67,7 +67,8 @@ class VirtualRobot:
         self.sim.command(linear, angular)
         self._ticks_since_command = 0
 
-    def step(self, scan: bool = True) -> list[Publication]:
+    def step(self, scan: bool = True,
+             wanted: Container[str] | None = None) -> list[Publication]:
         """Advance one tick and return the messages due at it (/scan on every second tick).
 
         With ``cmd_vel_timeout_s`` > 0, a command older than that is replaced by a stop first.
@@ -75,6 +76,7 @@ class VirtualRobot:
         Args:
             scan: whether to cast the LiDAR on ticks /scan is due (False: nobody listens, so
                 the rays are not cast and no /scan is returned).
+            wanted: the topics whose messages to build (None: all; a listener gets all).
         """
         timeout_s = self.parameters.cmd_vel_timeout_s
         expired = timeout_s > 0.0 and \
@@ -93,13 +95,19 @@ class VirtualRobot:
         twist_variance = (max(noise.odom_linear_sigma_mps**2, ODOM_TWIST_VARIANCE),
                           max(noise.odom_angular_sigma_rps**2, ODOM_TWIST_VARIANCE))
         odom = state.odometry
-        out: list[Publication] = [
-            (ODOM, odometry_msg(odom, now, ODOM_FRAME, pose_variance, twist_variance)),
-            (TF, tf_msg([transform_stamped_msg(now, ODOM_FRAME, BASE_FRAME, odom.x, odom.y,
-                                               odom.theta)])),
-            (GROUND_TRUTH, odometry_msg(state.ground_truth, now, MAP_FRAME)),
-        ]
-        if scan and state.tick % SCAN.every_ticks == 0:
+        if self.listeners:
+            wanted = None
+        out: list[Publication] = []
+        if wanted is None or ODOM.name in wanted:
+            out.append((ODOM, odometry_msg(odom, now, ODOM_FRAME, pose_variance,
+                                           twist_variance)))
+        if wanted is None or TF.name in wanted:
+            out.append((TF, tf_msg([transform_stamped_msg(now, ODOM_FRAME, BASE_FRAME, odom.x,
+                                                          odom.y, odom.theta)])))
+        if wanted is None or GROUND_TRUTH.name in wanted:
+            out.append((GROUND_TRUTH, odometry_msg(state.ground_truth, now, MAP_FRAME)))
+        if scan and state.tick % SCAN.every_ticks == 0 and (wanted is None or
+                                                            SCAN.name in wanted):
             out.append((SCAN, laser_scan_msg(self.sim.scan(), now)))
         for listener in self.listeners:
             listener(out)

@@ -455,7 +455,7 @@ def test_disconnect_forgets_everything_of_the_client(rig: Rig) -> None:
     rig.send(client, {"op": "advertise", "topic": "/mine", "type": "std_msgs/String"})
     rig.bridge.disconnect(client)
     assert client not in rig.bridge.sessions
-    assert rig.bridge.topics.subscribed_topics() == []
+    assert list(rig.bridge.topics.subscribed_topics()) == []
     assert "/mine" not in rig.bridge.topic_types()
 
 

@@ -184,3 +184,14 @@ def test_a_driver_gets_all_of_its_tick_in_one_write() -> None:
         driver.outbox.take(1 << 20)  # what the connection's write takes
     assert sorted(published) == [2, 3]
     assert writes == published  # each tick's /odom, /tf (and /scan): one write
+
+
+def test_only_the_messages_someone_subscribes_to_are_built() -> None:
+    robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
+    assert [spec.name for spec, _ in robot.step(scan=True, wanted={"/odom"})] == ["/odom"]
+    assert [spec.name for spec, _ in robot.step(scan=True, wanted={"/odom", "/scan"})] == \
+        ["/odom", "/scan"]  # the scan tick
+    heard: list[list[str]] = []
+    robot.listeners.append(lambda out: heard.append([spec.name for spec, _ in out]))
+    robot.step(scan=True, wanted={"/odom"})  # a listener (the ROS node) gets everything
+    assert heard == [["/odom", "/tf", "/ground_truth"]]

@@ -103,9 +103,9 @@ def test_a_message_no_encoder_can_write_is_a_fault_not_a_crash() -> None:
         robot = server.robot
         step = robot.step
 
-        def step_with_a_bad_message(scan: bool = True) -> list[Any]:
+        def step_with_a_bad_message(scan: bool = True, wanted: Any = None) -> list[Any]:
             robot.step = step  # type: ignore[method-assign]
-            return [*step(scan), (ODOM, {"header": object()})]
+            return [*step(scan, wanted), (ODOM, {"header": object()})]
 
         robot.step = step_with_a_bad_message  # type: ignore[method-assign]
 

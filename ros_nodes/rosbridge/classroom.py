@@ -225,7 +225,9 @@ class Classroom:
         self._tick_group(groups[0], now, lateness_s)
         for index, group in enumerate(groups[1:], start=1):
             due_s = now + index * slot_s
-            loop.call_at(due_s, self._tick_group, group, due_s, lateness_s)
+            # One loop turn later: a /cmd_vel that arrived with the timer is applied first
+            # (its reader was woken by the same poll, and runs before what call_soon adds).
+            loop.call_at(due_s, loop.call_soon, self._tick_group, group, due_s, lateness_s)
 
     @staticmethod
     def _tick_group(hosts: list[RobotHost], due_s: float, lateness_s: float) -> None:

@@ -217,10 +217,13 @@ class RobotHost:
             self.faults.record("expiring service calls", error)
 
     def _step(self) -> list[Publication]:
-        wants_scan = self.always_scan or self.bridge.graph.attached or \
-            self.bridge.topics.has_subscribers(SCAN.name)
+        """Step the robot; build only the messages some client subscribes to (a graph: all)."""
+        topics = self.bridge.topics
+        everything = self.always_scan or self.bridge.graph.attached
+        wanted = None if everything else topics.subscribed_topics()
         try:
-            publications = self.robot.step(scan=wants_scan)
+            publications = self.robot.step(scan=everything or topics.has_subscribers(SCAN.name),
+                                           wanted=wanted)
         except Exception as error:  # the robot's boundary: record, recover, go on
             self.faults.record("stepping the robot", error)
             self._recover("its step failed")

@@ -66,7 +66,7 @@ class GraphRelay:
         self._advertised.clear()
         self._refused.clear()
         if graph is not None:
-            for topic in self._bridge.topics.subscribed_topics():
+            for topic in list(self._bridge.topics.subscribed_topics()):
                 self.subscribe(None, topic, None)
 
     @property

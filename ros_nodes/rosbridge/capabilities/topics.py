@@ -10,7 +10,7 @@ other (client-defined) types are relayed as sent within the publisher's relay bu
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import TYPE_CHECKING, Any
 
 from physics import ConfigError
@@ -123,9 +123,9 @@ class Topics:
         """Every topic known here and its type."""
         return dict(self._types)
 
-    def subscribed_topics(self) -> list[str]:
-        """Topics some client subscribes to."""
-        return list(self._subscribers)
+    def subscribed_topics(self) -> Collection[str]:
+        """Topics some client subscribes to (a live view: do not keep it)."""
+        return self._subscribers.keys()
 
     def owned(self) -> frozenset[str]:
         """Topics only in-process endpoints publish."""
