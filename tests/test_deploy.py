@@ -8,6 +8,10 @@
   and file paths are changed, plus temp paths in the test's directory. roslibpy reads /odom
   through /rosbridge; /admin and its WebSocket need the password that the image's entrypoint
   script writes, and nobody gets in when no password is set.
+* The "class" profile (two ``websim serve --class --worker`` containers behind an nginx):
+  ``docker-compose --profile class config`` accepts it, its ports stay off the stack's,
+  web-interface/nginx-class.conf is exactly what ``websim nginx-config`` prints for the
+  workers the compose file declares, and the real nginx accepts that file (``nginx -t``).
 
 No image is built here: the Dockerfiles' RUN steps (apt, pip, npm) are not exercised.
 """
@@ -40,6 +44,7 @@ from websockets.sync.client import connect
 from physics.params import PROJECT_DIR
 from ros_nodes.parameters import RobotParameters
 from ros_nodes.topics import ROBOT_TOPICS
+from websim import cli
 
 from server_process import ServerProcess, free_port, wait_for
 
@@ -53,6 +58,10 @@ LAUNCH_FILE = BRIDGE_DIR / "websim.launch.py"
 
 BRIDGE = "ros2-web-bridge"
 WEB = "web-interface"
+CLASS_PROFILE = "class"
+CLASS_NGINX = "class-nginx"
+CLASS_NGINX_CONF = WEB_DIR / "nginx-class.conf"
+CLASS_CONF_TARGET = "/etc/nginx/nginx.conf"
 STUDENT_BRIDGE = "/rosbridge_websocket"
 ADMIN_BRIDGE = "/admin/rosbridge_websocket"
 ROSAPI = "/rosapi_node"
@@ -75,6 +84,40 @@ def load_yaml(path: Path) -> Any:
 
 def compose() -> dict[str, Any]:
     return dict(load_yaml(COMPOSE_FILE))
+
+
+def default_services(services: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The services ``docker-compose up`` starts: those in no profile."""
+    services = compose()["services"] if services is None else services
+    return {name: body for name, body in services.items() if not body.get("profiles")}
+
+
+def class_workers(services: dict[str, Any] | None = None) -> list[str]:
+    """The class profile's worker services, class-worker-1, class-worker-2, ... in order."""
+    services = compose()["services"] if services is None else services
+    found = [name for name in services if re.fullmatch(r"class-worker-\d+", name)]
+    return sorted(found, key=lambda name: int(name.rpartition("-")[2]))
+
+
+def worker_script(service: str) -> str:
+    """A class worker's ``sh -c`` script, as its container runs it (compose's ``$$`` is $)."""
+    command = compose()["services"][service]["command"]
+    assert command[:2] == ["sh", "-c"], command
+    return str(command[2]).replace("$$", "$")
+
+
+def option(script: str, name: str) -> str:
+    """The value after ``--name`` in a command line."""
+    found = re.search(rf"--{name} (\S+)", script)
+    assert found, f"no --{name} in {script!r}"
+    return found[1]
+
+
+def compose_env(**values: str) -> dict[str, str]:
+    """This process's environment without compose's variables, plus ``values``."""
+    env = {key: value for key, value in os.environ.items()
+           if not key.startswith(("ADMIN_", "CLASS_", "ROS_DISTRO"))}
+    return {**env, **values}
 
 
 def dockerfile(path: Path) -> list[tuple[str, str]]:
@@ -153,7 +196,7 @@ def test_docker_compose_config_accepts_the_file() -> None:
     assert result.returncode == 0, result.stderr
     assert "WARNING" not in result.stderr, result.stderr
     resolved = yaml.safe_load(result.stdout)
-    services = resolved["services"]
+    services = default_services(resolved["services"])  # docker-compose 1.x lists the rest too
     assert set(services) == {BRIDGE, WEB}
     assert services[BRIDGE]["build"]["args"]["ROS_DISTRO"] == "jazzy"
     published = {(port["published"], port["target"])
@@ -164,7 +207,7 @@ def test_docker_compose_config_accepts_the_file() -> None:
 
 
 def test_compose_has_both_services_on_one_network_with_restart_and_healthchecks() -> None:
-    services = compose()["services"]
+    services = default_services()
     assert set(services) == {BRIDGE, WEB}
     assert services[BRIDGE]["ports"] == ["9090:9090"]
     assert services[WEB]["ports"] == ["8080:80"]
@@ -176,6 +219,120 @@ def test_compose_has_both_services_on_one_network_with_restart_and_healthchecks(
     assert services[BRIDGE]["networks"] == services[WEB]["networks"]
     assert build_of(BRIDGE) == (PROJECT_DIR, BRIDGE_DIR / "Dockerfile")
     assert build_of(WEB) == (WEB_DIR, WEB_DIR / "Dockerfile")
+
+
+# --- the class profile: workers behind nginx -------------------------------------------------
+
+def class_ports() -> tuple[str, str]:
+    """(page port, WebSocket port) every class worker listens on, and nginx in front too."""
+    scripts = [worker_script(name) for name in class_workers()]
+    ports = {(option(script, "http-port"), option(script, "ws-port")) for script in scripts}
+    assert len(ports) == 1, f"the workers listen on different ports: {ports}"
+    return ports.pop()
+
+
+@pytest.mark.skipif(DOCKER_COMPOSE is None, reason="docker-compose not installed")
+def test_docker_compose_config_accepts_the_class_profile_beside_the_stack() -> None:
+    assert DOCKER_COMPOSE is not None
+    for token in ("", "s3cret"):  # unset, it is accepted all the same (see the worker's test)
+        env = compose_env(**({"CLASS_ADMIN_TOKEN": token} if token else {}))
+        result = subprocess.run([DOCKER_COMPOSE, "-f", str(COMPOSE_FILE), "--profile",
+                                 CLASS_PROFILE, "config"], env=env, capture_output=True,
+                                text=True, timeout=60, check=False)
+        assert result.returncode == 0, result.stderr
+        assert "WARNING" not in result.stderr, result.stderr
+        services = yaml.safe_load(result.stdout)["services"]
+        workers = class_workers(services)
+        assert workers == ["class-worker-1", "class-worker-2"]
+        assert set(services) == {BRIDGE, WEB, CLASS_NGINX, *workers}
+        for name in (CLASS_NGINX, *workers):
+            assert services[name]["profiles"] == [CLASS_PROFILE], name
+            assert services[name]["networks"] == services[BRIDGE]["networks"], name
+            assert services[name]["restart"] == "unless-stopped", name
+        for worker in workers:
+            body = services[worker]
+            assert body["build"] == services[BRIDGE]["build"], "the ros2-web-bridge image"
+            assert body["environment"]["CLASS_ADMIN_TOKEN"] == token
+            assert "ports" not in body, "reached through the class's nginx only"
+            assert set(body["volumes"]) == {f"{PROJECT_DIR / 'class'}:/class:ro",
+                                            f"{WEB_DIR}:/opt/websim/web-interface:ro"}
+        nginx = services[CLASS_NGINX]
+        assert nginx["build"] == services[WEB]["build"], "the web-interface image"
+        assert nginx["volumes"] == [f"{CLASS_NGINX_CONF}:{CLASS_CONF_TARGET}:ro"]
+        assert set(nginx["depends_on"]) == set(workers)
+        published = {(port["published"], port["target"]) for port in nginx["ports"]}
+        http, ws = class_ports()
+        assert published == {(int(http), int(http)), (int(ws), int(ws))}
+        stack = {port["published"] for name in (BRIDGE, WEB) for port in services[name]["ports"]}
+        assert stack == {8080, 9090}, "the stack's ports are as they were"
+        assert not stack & {host for host, _ in published}, "the class collides with the stack"
+
+
+def test_a_class_worker_runs_websim_serve_on_its_ports_and_refuses_without_a_token() -> None:
+    """Each worker's ``sh -c`` script run here for real, with ``exec websim`` replaced by a
+    printf of its arguments, which websim's own parser then reads."""
+    http, ws = class_ports()
+    for worker in class_workers():
+        script = worker_script(worker)
+        assert "exec websim serve " in script
+        refused = subprocess.run(["sh", "-c", script], env=compose_env(), capture_output=True,
+                                 text=True, timeout=10, check=False)
+        assert refused.returncode != 0 and refused.stdout == ""
+        assert "set CLASS_ADMIN_TOKEN, the instructor's token" in refused.stderr
+        printing = script.replace("exec websim", "exec printf '%s\\n' websim")
+        printed = subprocess.run(["sh", "-c", printing],
+                                 env=compose_env(CLASS_ADMIN_TOKEN="two words"),
+                                 capture_output=True, text=True, timeout=10, check=True)
+        argv = printed.stdout.splitlines()
+        assert argv[:2] == ["websim", "serve"]
+        args = cli.build_parser().parse_args(argv[1:])
+        assert (args.class_spec, args.worker, args.host) == ("/class/roster.txt", True, "0.0.0.0")
+        assert (args.http_port, args.ws_port, args.admin_token) == (int(http), int(ws),
+                                                                     "two words")
+        assert args.public_ws_port is None, "its own WebSocket port is the public one"
+        healthcheck = compose()["services"][worker]["healthcheck"]["test"]
+        assert f"http://127.0.0.1:{http}/healthz" in " ".join(healthcheck)
+    nginx_check = compose()["services"][CLASS_NGINX]["healthcheck"]["test"]
+    assert nginx_check[-1] == f"http://127.0.0.1:{http}/workers.json"
+
+
+def test_the_class_nginx_conf_is_what_websim_nginx_config_prints(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """For the workers docker-compose.yml declares: a worker added there without the conf
+    regenerated (the header's command) fails here."""
+    http, ws = class_ports()
+    workers = [f"{name}:{http}:{ws}" for name in class_workers()]
+    assert cli.main(["nginx-config", "--workers", *workers, "--listen-http", http,
+                     "--listen-ws", ws]) == 0
+    assert capsys.readouterr().out == CLASS_NGINX_CONF.read_text()
+    header = COMPOSE_FILE.read_text()
+    assert f"--listen-http {http} --listen-ws {ws} > web-interface/{CLASS_NGINX_CONF.name}" \
+        in header
+
+
+@pytest.mark.skipif(NGINX is None, reason="nginx not installed")
+def test_the_real_nginx_accepts_the_class_conf(tmp_path: Path) -> None:
+    """``nginx -t`` on web-interface/nginx-class.conf: a check of syntax and directives, not a
+    run (tests/test_scale_out.py runs ``websim nginx-config``'s output in front of real
+    workers). nginx resolves upstream hosts while it tests, and the compose service names
+    resolve only in Docker's network, so they become 127.0.0.1 (nothing need listen there:
+    ``nginx -t`` connects to nothing and binds nothing). The error log, pid and temp paths go
+    to the test's directory; nothing else changes."""
+    assert NGINX is not None
+    conf = CLASS_NGINX_CONF.read_text()
+    for worker in class_workers():
+        assert f"server {worker}:" in conf and f"http://{worker}:" in conf, worker
+        conf = conf.replace(f"{worker}:", "127.0.0.1:")
+    temp_paths = "".join(f"    {kind}_temp_path {tmp_path / kind};\n"
+                         for kind in ("client_body", "proxy", "fastcgi", "uwsgi", "scgi"))
+    path = tmp_path / "nginx.conf"
+    path.write_text(conf.replace("http {\n", "http {\n" + temp_paths, 1))
+    directives = f"pid {tmp_path / 'nginx.pid'}; error_log {tmp_path / 'error.log'};"
+    result = subprocess.run([NGINX, "-t", "-p", str(tmp_path), "-c", str(path), "-g",
+                             directives], capture_output=True, text=True, timeout=30,
+                            check=False)
+    assert result.returncode == 0, result.stderr
+    assert "test is successful" in result.stderr
 
 
 def test_nothing_is_tied_to_amd64() -> None:

@@ -52,7 +52,8 @@ def build_parser() -> argparse.ArgumentParser:
     compare.set_defaults(run=compare_command.run)
 
     proxy = commands.add_parser(
-        "nginx-config", help="print an nginx.conf routing a class's robots to its workers",
+        "nginx-config", help="print an nginx.conf routing a class's robots to its workers "
+                             "(and each worker's instructor view at /workers/K/)",
         description="Print an nginx configuration that routes /robots/NAME (pages and "
                     "WebSockets) to 'websim serve --class ROSTER --worker' processes with "
                     "hash $robot consistent: the same name always reaches the same worker.")

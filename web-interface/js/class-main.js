@@ -1,23 +1,24 @@
-// /class: the instructor's dashboard. Every robot of a class live in one grid, on ONE
-// WebSocket: the instructor's root connection (class-root.js), where robot NAME's topics and
-// services are under /NAME. This module only wires the others: the token (class-token.js),
-// the robots' topics (class-feed.js), their status (class-poller.js), the commands
-// (class-commands.js) and the grid (class-grid.js), drawn in one animation loop.
+// /class: the instructor's dashboard. Every robot of a class live in one grid, on the
+// instructor's root connection (class-root.js), where robot NAME's topics and services are
+// under /NAME: ONE WebSocket to a single process, or one per worker for a class spread over
+// workers behind nginx (class-workers.js, class-roots.js). This module only wires the others:
+// the token (class-token.js), the robots' topics (class-feed.js), their status
+// (class-poller.js), the commands (class-commands.js) and the grid (class-grid.js), drawn in
+// one animation loop.
 
 import { ROSLIB } from './vendor.js';
-import { Connection, loadSiteConfig, withoutToken } from './connection.js';
+import { loadSiteConfig } from './connection.js';
 import { runFrameLoop } from './connection-bar.js';
 import { loadRobot, parameterSpec } from './robot.js';
 import { rootWsUrl } from './class-plan.js';
-import {
-  explainClosed, explainNoRobots, NEEDS_TOKEN, observedRoslib, probeHealth,
-} from './class-root.js';
+import { explainNoRobots, NEEDS_TOKEN, probeHealth } from './class-root.js';
+import { loadWorkers, rootTargets } from './class-workers.js';
+import { ClassRoots, rootsBadge, rootsMessage } from './class-roots.js';
 import { bindTokenCard, instructorToken } from './class-token.js';
 import { ClassFeed } from './class-feed.js';
 import { StatusPoller } from './class-poller.js';
 import {
-  ClassCommands, fanOutSummary, forAll, modeChoices, otherMode, PAYLOAD_FACTORS, payloadFactor,
-  PARAMETERS,
+  fanOutSummary, forAll, modeChoices, otherMode, PAYLOAD_FACTORS, payloadFactor, PARAMETERS,
 } from './class-commands.js';
 import { classSummary, isHeld, onStatus, onStatusError } from './class-state.js';
 import { ClassGrid } from './class-grid.js';
@@ -33,13 +34,15 @@ function showFatal(text) {
   banner.hidden = false;
 }
 
-/** The message over the grid: {kind, text}, or null to hide it. */
+/** The message over the grid: {kind, text} or {kind, lines} (one line each), or null. */
 function showMessage(message) {
   const element = $('#class-message');
   element.hidden = !message;
   if (!message) return;
   element.dataset.kind = message.kind;
-  element.textContent = message.text;
+  const lines = message.lines ?? [message.text];
+  element.replaceChildren(...lines.flatMap(
+    (line, i) => (i === 0 ? [line] : [document.createElement('br'), line])));
 }
 
 /** Runs one card's action; a refusal lands in its card with the server's reason. */
@@ -67,18 +70,18 @@ async function main() {
   let token = instructorToken(window.location, window.history, storage);
   let config;
   let robot;
+  let workers;
   try {
-    [config, robot] = await Promise.all([loadSiteConfig(), loadRobot()]);
-  } catch (error) { // robot.json: the dashboard guesses no topic names
+    [config, robot, workers] = await Promise.all([loadSiteConfig(), loadRobot(), loadWorkers()]);
+  } catch (error) { // robot.json: the dashboard guesses no topic names; a broken workers.json
     showFatal(error.message);
     return;
   }
-  const url = rootWsUrl(window.location, config.ws);
-  let lastClose = null;
-  const connection = new Connection(observedRoslib(ROSLIB, (close) => { lastClose = close; }),
-    { url, token, tokenUrl: url });
-  const commands = new ClassCommands(connection, robot);
-  const feed = new ClassFeed(connection, robot);
+  // One root (a single process), or one per worker behind nginx; the token goes to each.
+  const roots = new ClassRoots(ROSLIB, rootTargets(rootWsUrl(window.location, config.ws),
+    workers), robot, { token });
+  const { commands } = roots; // each robot's calls, over the root it lives behind
+  const feed = new ClassFeed(roots.list[0].connection, robot);
   const stateOf = (name) => feed.states.get(name);
   const poller = new StatusPoller({
     names: () => feed.names,
@@ -142,69 +145,94 @@ async function main() {
 
   $('#scans').addEventListener('change', (event) => feed.setScans(event.target.checked));
 
-  // The robots: listed when the root connection opens, and again now and then.
-  let robotsTimer = null;
-  const loadRobots = async () => {
-    try {
-      const added = feed.addRobots(await commands.robots());
-      grid.add(added.map(stateOf));
-      if (feed.names.length === 0) {
-        showMessage({ kind: 'info', text: 'The class has no robots yet.' });
-      } else {
-        showMessage(null);
-      }
-    } catch (error) {
-      showMessage(explainNoRobots(error.message));
-    }
+  // What the page says: each root's state, and one line about the class.
+  const badge = $('#conn-status');
+  let classMessage = null;
+  let tokenCard = null;
+  const render = () => {
+    const shown = rootsBadge(roots.list);
+    badge.textContent = shown.text;
+    badge.dataset.status = shown.status;
+    badge.title = shown.title;
+    if (!token) return; // the badge says "no token"; the message NEEDS_TOKEN
+    const { message, askToken } = rootsMessage(roots.list, classMessage);
+    showMessage(message);
+    tokenCard?.ask(askToken);
+  };
+  const noToken = () => {
+    badge.textContent = 'no token';
+    badge.dataset.status = 'closed';
+    showMessage({ kind: 'info', text: NEEDS_TOKEN });
   };
 
-  const badge = $('#conn-status');
-  const tokenCard = bindTokenCard({
+  // The robots: listed by each root when it opens, and again now and then.
+  const noRobots = roots.list.length === 1 ? 'The class has no robots yet.'
+    : 'No worker hosts a robot yet: a worker makes a robot when its student first connects.';
+  const loadRobots = async (root) => {
+    try {
+      const added = feed.addRobots(roots.claim(root, await root.commands.robots()),
+        root.connection);
+      grid.add(added.map(stateOf));
+      root.listed = true;
+      root.message = null;
+      classMessage = feed.names.length === 0 ? { kind: 'info', text: noRobots } : null;
+    } catch (error) {
+      root.message = explainNoRobots(error.message);
+    }
+    render();
+  };
+  tokenCard = bindTokenCard({
     card: $('#token-card'), form: $('#token-form'), input: $('#token-input'),
     forget: $('#token-forget'),
   }, {
     storage,
     onToken: (newToken) => {
       token = newToken;
+      for (const root of roots.list) {
+        root.failure = null;
+        root.message = null;
+      }
       if (token) {
-        connection.connect(url, token);
+        roots.connect(token);
       } else {
-        connection.close();
-        badge.textContent = 'no token';
-        showMessage({ kind: 'info', text: NEEDS_TOKEN });
+        roots.close();
+        noToken();
       }
     },
   });
 
-  connection.addEventListener('status', async (event) => {
-    const { status, message } = event.detail;
-    badge.textContent = status;
-    badge.dataset.status = status;
-    badge.title = message;
-    if (status === 'connecting' || status === 'connected' || !token) return;
-    const close = lastClose;
-    if (close?.opened) {
-      showMessage({ kind: 'warn', text: message }); // lost: Connection reconnects
-      return;
-    }
-    const health = await probeHealth();
-    const explained = explainClosed({ url: withoutToken(url), close, health });
-    if (connection.isConnected) return; // it opened while the server was asked
-    showMessage(explained);
-    tokenCard.ask(explained.askToken);
-  });
-  connection.addEventListener('connected', () => {
-    tokenCard.ask(false);
-    showMessage({ kind: 'info', text: 'Connected; asking for the class\'s robots…' });
-    loadRobots();
-    poller.start();
-    clearInterval(robotsTimer);
-    robotsTimer = setInterval(loadRobots, ROBOTS_REFRESH_MS);
-  });
-  connection.addEventListener('disconnected', () => {
-    poller.stop();
-    clearInterval(robotsTimer);
-  });
+  for (const root of roots.list) {
+    const { connection } = root;
+    let robotsTimer = null;
+    connection.addEventListener('status', async (event) => {
+      const { status, message } = event.detail;
+      render();
+      if (status === 'connecting' || status === 'connected' || !token) return;
+      const close = root.lastClose;
+      if (close?.opened) {
+        root.message = { kind: 'warn', text: message }; // lost: Connection reconnects
+        render();
+        return;
+      }
+      const health = await probeHealth();
+      if (connection.isConnected || !token) return; // it opened while the server was asked
+      root.failure = { close, health };
+      root.message = null;
+      render();
+    });
+    connection.addEventListener('connected', () => {
+      root.message = { kind: 'info', text: 'Connected; asking for the class\'s robots…' };
+      render();
+      loadRobots(root);
+      if (!poller.running) poller.start();
+      clearInterval(robotsTimer);
+      robotsTimer = setInterval(() => loadRobots(root), ROBOTS_REFRESH_MS);
+    });
+    connection.addEventListener('disconnected', () => {
+      if (!roots.anyConnected(root)) poller.stop();
+      clearInterval(robotsTimer);
+    });
+  }
 
   runFrameLoop((now) => grid.update(now), (now) => {
     const summary = classSummary(feed.states.values(), now);
@@ -212,18 +240,16 @@ async function main() {
     const element = $('#class-summary');
     if (element.textContent !== text) element.textContent = text;
   });
-  window.addEventListener('pagehide', () => connection.close());
+  window.addEventListener('pagehide', () => roots.close());
   window.addEventListener('pageshow', (event) => {
-    if (event.persisted && token) connection.connect();
+    if (event.persisted && token) roots.connect();
   });
-  window.websim = { connection, robot, feed, grid, poller, commands }; // for the console
+  window.websim = { roots, robot, feed, grid, poller, commands }; // for the console
 
   if (token) {
-    connection.connect();
+    roots.connect();
   } else {
-    badge.textContent = 'no token';
-    badge.dataset.status = 'closed';
-    showMessage({ kind: 'info', text: NEEDS_TOKEN });
+    noToken();
     tokenCard.ask(true);
   }
 }

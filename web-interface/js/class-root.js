@@ -6,7 +6,9 @@
 // server. So the page tells the two apart itself: observedRoslib() reports how each socket
 // closed (opened or not, the close frame's code and reason, which a server that accepts and
 // then closes does send), and the page's own server's /healthz says whether the server is up
-// and hosts a class. explainClosed() turns that into the sentence the dashboard shows.
+// and hosts a class. explainClosed() turns that into the sentence the dashboard shows. Behind
+// nginx, with a root per worker, a worker that fails while another accepted the same token is
+// not a token problem: explainWorkerClosed() says that worker is out of reach.
 
 /** The page server's health document (same server, so readable), relative to the page. */
 export const HEALTH_URL = 'healthz';
@@ -84,5 +86,22 @@ export function explainNoRobots(reason) {
     kind: 'error', askToken: false,
     text: `The server does not list a class's robots (/websim/robots: ${reason}). The `
       + 'dashboard is for "websim serve --class ROSTER|N --admin-token TOKEN".',
+  };
+}
+
+/**
+ * Why worker `url`'s root connection (shown without the token) did not open while another
+ * worker's opened with the same token: the token is right, so this worker is down, or nginx
+ * cannot reach it. {kind, text, askToken: false}; `close` is observedRoslib()'s report.
+ */
+export function explainWorkerClosed({ url, close }) {
+  if (close?.reason) {
+    return { kind: 'error', askToken: false, text: `The worker closed ${url}: ${close.reason}` };
+  }
+  return {
+    kind: 'warn', askToken: false,
+    text: `Cannot reach the class worker at ${url}: nginx answers, but not that worker (is its `
+      + '"websim serve --class ... --worker" running?). Its robots are missing until it '
+      + 'answers; the other workers\' robots are shown. Retrying…',
   };
 }
