@@ -20,6 +20,7 @@ from physics import Simulation, load_world
 from ros_nodes.rosbridge.bridge import Bridge, Session
 from ros_nodes.rosbridge.outbox import Outbox
 from ros_nodes.rosbridge.robot_endpoint import RobotEndpoint
+from ros_nodes.rosbridge.robot_host import RobotHost
 from ros_nodes.rosbridge.server import SimServer, start_websocket
 from ros_nodes.rosbridge.wire import WireFrames, serialize
 from ros_nodes.virtual_robot_core import VirtualRobot
@@ -195,3 +196,22 @@ def test_only_the_messages_someone_subscribes_to_are_built() -> None:
     robot.listeners.append(lambda out: heard.append([spec.name for spec, _ in out]))
     robot.step(scan=True, wanted={"/odom"})  # a listener (the ROS node) gets everything
     assert heard == [["/odom", "/tf", "/ground_truth"]]
+
+
+def test_a_throttle_counts_from_when_ticks_were_due_so_late_ticks_lose_nothing() -> None:
+    clock = [100.0]
+    host = RobotHost(VirtualRobot(Simulation(load_world("empty"), seed=0)),
+                     clock=lambda: clock[0])
+    watcher = Session("dashboard", True, Outbox())
+    host.bridge.connect(watcher)
+    host.bridge.handle(watcher, json.dumps({"op": "subscribe", "topic": "/odom",
+                                            "throttle_rate": 200, "queue_length": 100}))
+    lateness = [0.0, 0.018, 0.0, 0.002, 0.019, 0.0, 0.011, 0.0] * 5  # up to 19 ms late
+    delivered = []
+    for tick, late_s in enumerate(lateness):
+        clock[0] = 100.0 + 0.05 * tick + late_s
+        queued = len(watcher.outbox)
+        host.tick(late_s)
+        if len(watcher.outbox) > queued:
+            delivered.append(tick)
+    assert delivered == list(range(0, len(lateness), 4))  # every fourth tick, on the grid

@@ -79,9 +79,13 @@ class Bridge:
         """Send an in-process message (the robot's, the graph's) to ``topic``'s subscribers."""
         self.topics.publish(topic, msg, latch)
 
-    def publish_many(self, messages: list[tuple[str, Any]]) -> None:
-        """Send one tick's in-process messages; each client gets its share in one write."""
-        self.topics.publish_many(messages)
+    def publish_many(self, messages: list[tuple[str, Any]],
+                     tick_s: float | None = None) -> None:
+        """Send one tick's in-process messages; each client gets its share in one write.
+
+        ``tick_s``: when the tick was due (``clock`` s), for throttles.
+        """
+        self.topics.publish_many(messages, tick_s)
 
     def topic_types(self) -> dict[str, str]:
         """Every known topic and its type: the robot's, the clients' and the ROS graph's."""

@@ -154,7 +154,7 @@ class RobotHost:
         schedule: the tick schedule it follows (default: one of its own).
         idle_pause_s: stop ticking (keeping the state) once nobody has been connected for
             this long; the next connection resumes it. None: never pause.
-        clock: monotonic clock (s), for the idle time.
+        clock: monotonic clock (s), for the idle time and the bridge's throttles.
     """
 
     def __init__(self, robot: VirtualRobot, schedule: Schedule | None = None,
@@ -162,7 +162,7 @@ class RobotHost:
                  clock: Callable[[], float] = time.monotonic) -> None:
         self.robot = robot
         self.faults = Faults()
-        self.bridge = Bridge(faults=self.faults)
+        self.bridge = Bridge(clock=clock, faults=self.faults)
         self.endpoint = RobotEndpoint(self.bridge, robot)
         self.stats = TickStats()
         self.schedule = schedule or Schedule()
@@ -207,8 +207,8 @@ class RobotHost:
                     self.stats.scans_shed += 1
                     continue
             messages.append((spec.name, msg))
-        try:
-            self.bridge.publish_many(messages)
+        try:  # throttles count from when the tick was due: a late tick is no shorter gap
+            self.bridge.publish_many(messages, self.bridge.clock() - lateness_s)
         except Exception as error:  # the robot's boundary: record, go on
             self.faults.record(f"delivering {', '.join(name for name, _ in messages)}", error)
         try:

@@ -27,9 +27,10 @@ if TYPE_CHECKING:
 log = logging.getLogger("websim.bridge")
 
 THROTTLE_JITTER_S = 0.005
-"""Tick jitter a throttle tolerates: ``throttle_rate`` is the least time between two messages
-(rosbridge's definition), less this, so a 200 ms throttle on the 20 Hz /odom gives 5 Hz even
-when a tick starts a few milliseconds early relative to the last one sent."""
+"""What a throttle tolerates: ``throttle_rate`` is the least time between two messages
+(rosbridge's definition), less this. The robot's messages are timed at their tick's due time
+(``publish_many``), so a 200 ms throttle on the 20 Hz /odom gives exactly every fourth however
+late ticks run; this covers rounding, and clients' messages timed on arrival."""
 
 CLOSING_LOOP_S = 1.0
 """A client that published within this long closes a loop (a teleop page, a PID node): in
@@ -108,12 +109,15 @@ class Topics:
             self._latched[topic] = encoded
         self._deliver([encoded])
 
-    def publish_many(self, messages: list[tuple[str, Any]]) -> None:
+    def publish_many(self, messages: list[tuple[str, Any]],
+                     tick_s: float | None = None) -> None:
         """Send several in-process messages (one tick's) to their clients, not latched.
 
-        A client gets all of its messages of the tick in one write.
+        A client gets all of its messages of the tick in one write. ``tick_s``: when the
+        tick was due (monotonic s), the time throttles measure against, so a tick that runs
+        late does not make a throttled client miss its message.
         """
-        self._deliver([Encoded(topic, msg) for topic, msg in messages])
+        self._deliver([Encoded(topic, msg) for topic, msg in messages], tick_s)
 
     def has_subscribers(self, topic: str) -> bool:
         """Whether any client subscribes to ``topic``."""
@@ -222,13 +226,14 @@ class Topics:
         self._deliver([encoded])
         self._bridge.graph.publish(session, topic, type_name, msg)
 
-    def _deliver(self, messages: list[Encoded]) -> None:
+    def _deliver(self, messages: list[Encoded], now_s: float | None = None) -> None:
         """Queue ``messages`` (one tick's, or one client's publish) for their subscribers.
 
         Clients closing a loop get all of them first, in one write (``send_now``); then the
-        clients that only watch, whose writes wait for the end of the tick.
+        clients that only watch, whose writes wait for the end of the tick. ``now_s``: the
+        time throttles measure against (default: the clock).
         """
-        now = self._bridge.clock()
+        now = self._bridge.clock() if now_s is None else now_s
         audiences = [(encoded, subscribers) for encoded in messages
                      if (subscribers := self._subscribers.get(encoded.topic))]
         if not audiences:
