@@ -163,7 +163,8 @@ class MobileRobotPhysics:
             v *= fraction
             target = integrate_pose(self._pose, v, omega, dt_s)
         self._pose, self._v, self._omega = target, v, omega
-        self._sync_body()
+        # Nothing asks pymunk where a kinematic robot is (walls are queried, not the robot):
+        # its body is brought up to date when the dynamic model takes over (``mode``).
         return [EncoderSample(v, omega, dt_s)]
 
     def _free_fraction(self, start: Pose2D, end: Pose2D) -> float:
