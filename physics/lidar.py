@@ -22,6 +22,7 @@ What a beam reports:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -83,6 +84,10 @@ class Lidar:
                                           np.ones((2 * len(walls), 1))])
         """Which rows move with the laser (a - o and b - o do, e does not)."""
         self._a_cross_e = (a[:, 0] * e[:, 1] - a[:, 1] * e[:, 0])[:, None]
+        self.geometry_key = (params, a.tobytes(), b.tobytes(), self._circle_centre.tobytes(),
+                             self._circle_radius.tobytes())
+        """Equal for LiDARs that read the same ranges at the same pose (same beams, mount and
+        world shapes): one's ``raw_ranges_many`` serves them all."""
 
     @property
     def params(self) -> LidarParams:
@@ -242,9 +247,60 @@ class Lidar:
     def scan(self, robot_pose: Pose2D, rng: np.random.Generator | None = None,
              sigma_m: float = 0.0) -> LaserScan:
         """A full scan from the robot at ``robot_pose`` (map frame), as a ``LaserScan``."""
+        return self.scan_from_raw(self.raw_ranges(robot_pose), rng, sigma_m)
+
+    def scan_from_raw(self, raw_ranges_m: FloatArray, rng: np.random.Generator | None = None,
+                      sigma_m: float = 0.0) -> LaserScan:
+        """The ``LaserScan`` of raw distances (``raw_ranges``, or a row of ``raw_ranges_many``)."""
         p = self._params
-        ranges = self.finish(self.raw_ranges(robot_pose), rng, sigma_m)
+        ranges = self.finish(raw_ranges_m, rng, sigma_m)
         return LaserScan(ranges=tuple(ranges.tolist()), angle_min=p.angle_min_rad,
                          angle_max=p.angle_max_rad, angle_increment=p.angle_increment_rad,
                          range_min=p.range_min_m, range_max=p.range_max_m,
                          scan_time=p.scan_time_s, time_increment=p.time_increment_s)
+
+    def raw_ranges_many(self, robot_poses: Sequence[Pose2D]) -> FloatArray:
+        """``raw_ranges`` at each of ``robot_poses``, one row each, computed together.
+
+        The robots of a class in one world scan on the same tick: one set of array
+        operations over robots x walls x beams instead of one per robot, where numpy's
+        per-call cost, not the arithmetic, is most of the price (measured: about half the
+        time per robot for ten robots). Worlds worth culling go one robot at a time.
+        """
+        if len(robot_poses) < 2 or \
+                len(self._wall_index) + len(self._circle_index) > CULL_ABOVE_SHAPES:
+            return np.stack([self.raw_ranges(pose) for pose in robot_poses])
+        lasers = [self.laser_pose(pose) for pose in robot_poses]
+        origin = np.array([(laser.x, laser.y) for laser in lasers])
+        theta = np.array([laser.theta for laser in lasers])
+        cos_t, sin_t = np.cos(theta)[:, None], np.sin(theta)[:, None]
+        dir_x = cos_t * self._beam_cos - sin_t * self._beam_sin  # robots x beams
+        dir_y = sin_t * self._beam_cos + cos_t * self._beam_sin
+        if len(self._wall_a):
+            ranges = self._hit_walls_many(origin, dir_x, dir_y)
+        else:
+            ranges = np.full(dir_x.shape, np.inf)
+        if len(self._circle_radius):
+            for row, laser in enumerate(lasers):
+                ranges[row] = np.minimum(ranges[row], self._hit_circles(
+                    laser, dir_x[row], dir_y[row], self._all_circles))
+        ranges[ranges > self._params.range_max_m] = np.inf
+        return ranges
+
+    def _hit_walls_many(self, origin: FloatArray, dir_x: FloatArray,
+                        dir_y: FloatArray) -> FloatArray:
+        """``_hit_walls`` of every wall for several lasers: robots x beams."""
+        count = len(self._wall_a)
+        shift = np.stack((origin[:, 1], -origin[:, 0]), axis=1)[:, None, :]
+        rows = self._fixed_rows[None] - self._row_moves[None] * shift  # robots x 3W x 2
+        products = rows @ np.stack((dir_x, dir_y), axis=1)  # robots x 3W x beams
+        denom = products[:, :count]
+        edge = self._edge
+        t_num = (self._a_cross_e[None, :, 0] - (origin[:, :1] * edge[None, :, 1]
+                                                 - origin[:, 1:] * edge[None, :, 0]))[..., None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = t_num / denom
+        missed = (products[:, count:2 * count] * products[:, 2 * count:] > 0.0) | \
+            ~(t >= 0.0) | (np.abs(denom) < PARALLEL_EPS)
+        t[missed] = np.inf
+        return t.min(axis=1)  # type: ignore[no-any-return]

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -179,6 +180,11 @@ class Simulation:
         pose = self._robot.pose
         return Odometry(pose.x, pose.y, pose.theta, self._robot.v, self._robot.omega)
 
+    @property
+    def scan_is_current(self) -> bool:
+        """Whether this tick's scan has been cast already."""
+        return self._scan_cache is not None and self._scan_cache[0] == self._tick
+
     def scan(self) -> LaserScan:
         """The LiDAR scan at the current pose (computed once per tick)."""
         if self._scan_cache is None or self._scan_cache[0] != self._tick:
@@ -241,6 +247,25 @@ class Simulation:
         self._command = Command(0.0, 0.0)
         self._tick = 0
         self._scan_cache = None
+
+
+def cast_scans(simulations: Sequence[Simulation]) -> None:
+    """Cast this tick's scan of every simulation, those with alike LiDARs together.
+
+    Robots of a class in one world have equal LiDAR geometry (``Lidar.geometry_key``): their
+    rays are intersected in one ``raw_ranges_many``; each robot still adds its own noise from
+    its own stream, so ``scan()`` gives what it would have cast alone (to rounding, ~1e-15 m).
+    """
+    alike: dict[Any, list[Simulation]] = {}
+    for simulation in simulations:
+        if not simulation.scan_is_current:
+            alike.setdefault(simulation._lidar.geometry_key, []).append(simulation)
+    for group in alike.values():
+        lidar = group[0]._lidar
+        raws = lidar.raw_ranges_many([simulation._robot.pose for simulation in group])
+        for simulation, raw in zip(group, raws, strict=True):
+            simulation._scan_cache = (simulation._tick, simulation._lidar.scan_from_raw(
+                raw, simulation._scan_rng(), simulation._noise.scan_sigma_m))
 
 
 def _check_clearance(world_space: WorldSpace, world: World, x: float, y: float,

@@ -71,13 +71,19 @@ class VirtualRobot:
              wanted: Container[str] | None = None) -> list[Publication]:
         """Advance one tick and return the messages due at it (/scan on every second tick).
 
-        With ``cmd_vel_timeout_s`` > 0, a command older than that is replaced by a stop first.
+        ``advance`` then ``publications``. With ``cmd_vel_timeout_s`` > 0, a command older
+        than that is replaced by a stop first.
 
         Args:
             scan: whether to cast the LiDAR on ticks /scan is due (False: nobody listens, so
                 the rays are not cast and no /scan is returned).
             wanted: the topics whose messages to build (None: all; a listener gets all).
         """
+        self.advance()
+        return self.publications(scan, wanted)
+
+    def advance(self) -> None:
+        """Advance the simulation one tick (stopping a command past its timeout first)."""
         timeout_s = self.parameters.cmd_vel_timeout_s
         expired = timeout_s > 0.0 and \
             self._ticks_since_command * self.sim.dt_s >= timeout_s - TIMEOUT_TOLERANCE_S
@@ -85,16 +91,29 @@ class VirtualRobot:
             self.sim.command(0.0, 0.0)
         self._ticks_since_command += 1
         self.sim.step()
+        collided = self.sim.state().collided
+        if collided and not self._colliding:
+            self.collisions += 1
+        self._colliding = collided
+
+    def scan_due(self, scan: bool = True, wanted: Container[str] | None = None) -> bool:
+        """Whether ``publications(scan, wanted)`` will carry a /scan at this tick."""
+        if self.listeners:
+            wanted = None
+        return scan and self.sim.tick % SCAN.every_ticks == 0 and \
+            (wanted is None or SCAN.name in wanted)
+
+    def publications(self, scan: bool = True,
+                     wanted: Container[str] | None = None) -> list[Publication]:
+        """The messages due at the tick just advanced to (arguments as ``step``'s)."""
         now = self._clock()
         state = self.sim.state()
-        if state.collided and not self._colliding:
-            self.collisions += 1
-        self._colliding = state.collided
         noise = self.sim.noise
         pose_variance = (ODOM_POSE_VARIANCE,) * 3
         twist_variance = (max(noise.odom_linear_sigma_mps**2, ODOM_TWIST_VARIANCE),
                           max(noise.odom_angular_sigma_rps**2, ODOM_TWIST_VARIANCE))
         odom = state.odometry
+        scan_due = self.scan_due(scan, wanted)
         if self.listeners:
             wanted = None
         out: list[Publication] = []
@@ -106,8 +125,7 @@ class VirtualRobot:
                                                           odom.y, odom.theta)])))
         if wanted is None or GROUND_TRUTH.name in wanted:
             out.append((GROUND_TRUTH, odometry_msg(state.ground_truth, now, MAP_FRAME)))
-        if scan and state.tick % SCAN.every_ticks == 0 and (wanted is None or
-                                                            SCAN.name in wanted):
+        if scan_due:
             out.append((SCAN, laser_scan_msg(self.sim.scan(), now)))
         for listener in self.listeners:
             listener(out)

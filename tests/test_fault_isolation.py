@@ -101,13 +101,13 @@ def test_a_state_gone_non_finite_is_reset_to_spawn(mode: str) -> None:
 def test_a_message_no_encoder_can_write_is_a_fault_not_a_crash() -> None:
     def fault(server: SimServer) -> None:
         robot = server.robot
-        step = robot.step
+        publications = robot.publications
 
-        def step_with_a_bad_message(scan: bool = True, wanted: Any = None) -> list[Any]:
-            robot.step = step  # type: ignore[method-assign]
-            return [*step(scan, wanted), (ODOM, {"header": object()})]
+        def with_a_bad_message(scan: bool = True, wanted: Any = None) -> list[Any]:
+            robot.publications = publications  # type: ignore[method-assign]
+            return [*publications(scan, wanted), (ODOM, {"header": object()})]
 
-        robot.step = step_with_a_bad_message  # type: ignore[method-assign]
+        robot.publications = with_a_bad_message  # type: ignore[method-assign]
 
     health, rate_hz, server = asyncio.run(run_with_fault(fault))
     assert_recovered(health, rate_hz, server, "encoding /odom: TypeError")

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from physics import LidarParams, NoiseParams, Pose2D, Simulation, World, load_world
+from physics.simulation import cast_scans
 from physics.world import world_from_dict
 
 from conftest import SHIPPED_WORLDS, make_sim
@@ -152,6 +153,39 @@ def assert_paths_agree(sim: Simulation, poses: list[Pose2D]) -> None:
 def test_fast_scan_equals_pymunk_reference_in_shipped_worlds(name: str) -> None:
     world = load_world(name)
     assert_paths_agree(Simulation(world, seed=0), random_poses(world, 150, seed=1))
+
+
+@pytest.mark.parametrize("name", SHIPPED_WORLDS)
+def test_many_robots_cast_together_equal_the_reference(name: str) -> None:
+    world = load_world(name)
+    sim = Simulation(world, seed=0)
+    poses = random_poses(world, 40, seed=2)
+    together = sim.lidar.raw_ranges_many(poses)
+    for pose, row in zip(poses, together, strict=True):
+        reference = sim.lidar.raw_ranges_reference(pose)
+        assert np.array_equal(np.isinf(row), np.isinf(reference)), pose
+        finite = np.isfinite(reference)
+        assert np.max(np.abs(row[finite] - reference[finite]), initial=0.0) <= 1e-9, pose
+
+
+def test_a_class_cast_together_reads_what_each_robot_reads_alone() -> None:
+    """Same world, different seeds, noise on: each keeps its own noise stream."""
+    noise = NoiseParams(scan_sigma_m=0.01)
+
+    def robots() -> list[Simulation]:
+        sims = [Simulation(load_world("maze"), noise=noise, seed=seed) for seed in range(6)]
+        for index, sim in enumerate(sims):
+            sim.command(0.1 + 0.02 * index, 0.3 - 0.1 * index)
+            sim.step(4 + index)
+        return sims
+
+    together, alone = robots(), robots()
+    cast_scans(together)
+    assert all(sim.scan_is_current for sim in together)
+    for sim_together, sim_alone in zip(together, alone, strict=True):
+        assert sim_together.scan().ranges == pytest.approx(sim_alone.scan().ranges, abs=1e-12)
+        assert sim_together.scan().ranges != together[0].scan().ranges or sim_together is \
+            together[0]  # different poses and noise: different scans
 
 
 @pytest.mark.parametrize("seed", range(4))

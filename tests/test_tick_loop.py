@@ -68,4 +68,5 @@ def test_an_overloaded_loop_sheds_scans_and_keeps_odometry() -> None:
     assert topics.count("/odom") == server.stats.ticks
     assert server.stats.scans_shed > 0
     assert topics.count("/scan") + server.stats.scans_shed == server.stats.ticks // 2
+    assert server.stats.scans_cast == topics.count("/scan")  # a shed scan is not even cast
     assert server.health()["scans_shed"] == server.stats.scans_shed

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from physics import ConfigError
+from physics.simulation import cast_scans
 from ros_nodes.rosbridge.robot_host import RobotHost, Schedule
 from ros_nodes.virtual_robot_core import VirtualRobot
 
@@ -231,6 +232,15 @@ class Classroom:
 
     @staticmethod
     def _tick_group(hosts: list[RobotHost], due_s: float, lateness_s: float) -> None:
-        late_s = max(0.0, asyncio.get_running_loop().time() - due_s)
-        for host in hosts:
-            host.tick(lateness_s + late_s)
+        """Advance a group's robots, cast their scans together, then deliver each's tick."""
+        late_s = lateness_s + max(0.0, asyncio.get_running_loop().time() - due_s)
+        advanced = [host for host in hosts if host.begin_tick(late_s)]
+        scanning = [host for host in advanced if host.scan_due(late_s)]
+        if len(scanning) > 1:
+            try:
+                cast_scans([host.robot.sim for host in scanning])
+            except Exception as error:  # each robot then casts its own, within its boundary
+                for host in scanning:
+                    host.faults.record("casting the class's scans together", error)
+        for host in advanced:
+            host.end_tick(late_s)

@@ -17,7 +17,7 @@ import logging
 import math
 import time
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,7 +29,7 @@ from ros_nodes.rosbridge.robot_endpoint import RobotEndpoint
 from ros_nodes.rosbridge.robot_services import require_admin
 from ros_nodes.rosbridge.session import Session
 from ros_nodes.topics import SCAN
-from ros_nodes.virtual_robot_core import Publication, VirtualRobot
+from ros_nodes.virtual_robot_core import VirtualRobot
 
 log = logging.getLogger("websim.robot")
 
@@ -192,20 +192,61 @@ class RobotHost:
         """One tick: step the robot, deliver its messages, expire service calls; never raises.
 
         A robot nobody has been connected to for ``idle_pause_s`` is not stepped (paused).
+        ``begin_tick`` then ``end_tick``; a class casts its robots' scans in between
+        (``physics.simulation.cast_scans``).
+        """
+        if self.begin_tick(lateness_s):
+            self.end_tick(lateness_s)
+
+    def begin_tick(self, lateness_s: float = 0.0) -> bool:
+        """Advance the robot one tick, unless it is paused; whether it advanced. Never raises.
+
+        A robot whose step failed, or whose state went non-finite, is reset to its spawn pose.
         """
         idle = self._idle()  # first: it notes when clients were last here
         self.stats.paused = self.held or idle
         if self.stats.paused:
-            return
+            return False
         self.stats.ticks += 1
         self.stats.lateness_s.append(lateness_s)
+        try:
+            self.robot.advance()
+        except Exception as error:  # the robot's boundary: record, recover, go on
+            self.faults.record("stepping the robot", error)
+            self._recover("its step failed")
+            return False
+        truth = self.robot.sim.ground_truth()
+        if not all(math.isfinite(value) for value in truth):
+            self.faults.record("stepping the robot", FloatingPointError(
+                f"non-finite state {tuple(truth)}"))
+            self._recover("its state went non-finite")
+            return False
+        return True
+
+    def scan_due(self, lateness_s: float = 0.0) -> bool:
+        """Whether ``end_tick`` will cast a /scan (someone wants it, and the tick is on time)."""
+        return lateness_s <= SHED_SCANS_AFTER_S and self.robot.scan_due(*self._wants())
+
+    def end_tick(self, lateness_s: float = 0.0) -> None:
+        """Build and deliver the messages of the tick ``begin_tick`` advanced to; never raises.
+
+        Only messages some client subscribes to are built (for a ROS graph: all). A tick that
+        starts half a period late casts no /scan: it is shed, /odom and /tf keep their rate.
+        """
+        scan, wanted = self._wants()
+        if scan and lateness_s > SHED_SCANS_AFTER_S and self.robot.scan_due(scan, wanted):
+            self.stats.scans_shed += 1
+            scan = False
+        try:
+            publications = self.robot.publications(scan, wanted)
+        except Exception as error:  # the robot's boundary: record, recover, go on
+            self.faults.record("stepping the robot", error)
+            self._recover("building its messages failed")
+            publications = []
         messages = []
-        for spec, msg in self._step():
+        for spec, msg in publications:
             if spec is SCAN:
                 self.stats.scans_cast += 1
-                if lateness_s > SHED_SCANS_AFTER_S:
-                    self.stats.scans_shed += 1
-                    continue
             messages.append((spec.name, msg))
         try:  # throttles count from when the tick was due: a late tick is no shorter gap
             self.bridge.publish_many(messages, self.bridge.clock() - lateness_s)
@@ -216,25 +257,12 @@ class RobotHost:
         except Exception as error:
             self.faults.record("expiring service calls", error)
 
-    def _step(self) -> list[Publication]:
-        """Step the robot; build only the messages some client subscribes to (a graph: all)."""
+    def _wants(self) -> tuple[bool, Collection[str] | None]:
+        """(scan, wanted) for the robot: what its clients subscribe to (a graph: all)."""
         topics = self.bridge.topics
-        everything = self.always_scan or self.bridge.graph.attached
-        wanted = None if everything else topics.subscribed_topics()
-        try:
-            publications = self.robot.step(scan=everything or topics.has_subscribers(SCAN.name),
-                                           wanted=wanted)
-        except Exception as error:  # the robot's boundary: record, recover, go on
-            self.faults.record("stepping the robot", error)
-            self._recover("its step failed")
-            return []
-        truth = self.robot.sim.ground_truth()
-        if not all(math.isfinite(value) for value in truth):
-            self.faults.record("stepping the robot", FloatingPointError(
-                f"non-finite state {tuple(truth)}"))
-            self._recover("its state went non-finite")
-            return []
-        return publications
+        if self.always_scan or self.bridge.graph.attached:
+            return True, None
+        return topics.has_subscribers(SCAN.name), topics.subscribed_topics()
 
     def _recover(self, why: str) -> None:
         """Put the robot back at spawn (a finite state) after a fault."""
