@@ -47,7 +47,8 @@ class ClientLimits:
             sustained; a client over it is read more slowly (its socket backs up).
         handling_burst_s: handling time a client may use at once before it is slowed (s).
         stall_timeout_s: a client whose socket accepts nothing for this long while frames
-            wait is closed (1008) (s).
+            wait (watched once it is behind: ``server.WRITE_BUFFER_BYTES`` beyond its kernel
+            buffer) is closed (1008) (s).
         close_timeout_s: how long a close handshake may take before the connection is
             aborted (s).
         max_replies: replies (service responses, statuses) that may wait at once.

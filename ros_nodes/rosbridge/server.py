@@ -2,8 +2,10 @@
 
 asyncio and websockets, in the websockets idiom: one ``ClientConnection`` object per client
 (register on connect, unregister in ``finally``), no state shared between them but the
-robot's bridge. Each client has a reader (frames into ``Bridge.handle``), a writer (its
-``Outbox`` onto the socket) and a watchdog, so a slow client only ever delays itself.
+robot's bridge. Each client has a reader (frames into ``Bridge.handle``) and its ``Outbox``,
+flushed onto the socket in one write after each tick (frames serialized once for all
+clients, ``wire.py``); a client that falls behind gets a writer task that waits for its
+socket, and a watchdog, so a slow client only ever delays itself.
 
 Limits (``ClientLimits``, the README's limits table): pages from other origins are refused at
 the handshake (403, ``OriginPolicy``); a message over ``max_frame_bytes`` closes the
