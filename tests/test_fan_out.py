@@ -7,8 +7,10 @@ over real sockets with a client that closes a loop among many that only watch.
 from __future__ import annotations
 
 import asyncio
+import gc
 import json
 import time
+import weakref
 
 import pytest
 from websockets.asyncio.client import connect
@@ -215,3 +217,35 @@ def test_a_throttle_counts_from_when_ticks_were_due_so_late_ticks_lose_nothing()
         if len(watcher.outbox) > queued:
             delivered.append(tick)
     assert delivered == list(range(0, len(lateness), 4))  # every fourth tick, on the grid
+
+
+def test_a_closed_connection_is_freed_at_once_not_at_the_next_full_collection() -> None:
+    """A client's buffers (up to a megabyte a frame) must not wait for the cyclic GC."""
+    async def scenario() -> None:
+        server = SimServer(VirtualRobot(Simulation(load_world("empty"), seed=0)), "t")
+        listening = await start_websocket(server, "127.0.0.1", 0)
+        port = listening.sockets[0].getsockname()[1]
+        ticks = asyncio.create_task(server.run_ticks())
+        try:
+            async with connect(f"ws://127.0.0.1:{port}/", compression=None) as client:
+                await client.send(json.dumps({"op": "subscribe", "topic": "/odom"}))
+                await asyncio.wait_for(client.recv(), 5.0)
+                session, = server.bridge.sessions
+                gone = weakref.ref(session)
+                del session
+            deadline = time.monotonic() + 5.0
+            while server.bridge.sessions and time.monotonic() < deadline:
+                await asyncio.sleep(0.02)
+            for _ in range(5):  # let the connection's tasks finish
+                await asyncio.sleep(0.05)
+            assert gone() is None, [type(r).__name__ for r in gc.get_referrers(gone())]
+        finally:
+            ticks.cancel()
+            listening.close()
+            await listening.wait_closed()
+
+    gc.disable()
+    try:
+        asyncio.run(scenario())
+    finally:
+        gc.enable()

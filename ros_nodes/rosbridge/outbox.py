@@ -76,6 +76,16 @@ class Outbox:
         queue.append((next(self._sequence), frame))
         self._grow(len(frame))
 
+    def detach(self) -> None:
+        """Forget the connection's callbacks once it is gone.
+
+        They are its bound methods: kept, they would tie the connection (and its buffers,
+        up to a megabyte per frame) to this outbox in a cycle that only a full garbage
+        collection frees.
+        """
+        self._wake = None
+        self._send = None
+
     def send_now(self) -> None:
         """Have what waits written now rather than after the current callback (a tick)."""
         if self._send is not None:

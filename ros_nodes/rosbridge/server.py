@@ -317,6 +317,7 @@ class ClientConnection:
         finally:
             writer.cancel()
             self._bridge.disconnect(self.session)
+            self.session.outbox.detach()
             log.info("client %s disconnected", self._peer)
             if self._closing is not None:
                 await asyncio.wait([self._closing])
