@@ -57,7 +57,6 @@ import concurrent.futures
 import contextlib
 import dataclasses
 import json
-import os
 import random
 import shutil
 import subprocess
@@ -97,7 +96,7 @@ from load import Commands
 
 from ros_nodes.rosbridge.classroom import numbered_roster
 from ros_nodes.topics import ODOM
-from websim.nginx_config import Worker, nginx_config
+from websim.nginx_config import Worker, foreground_command, in_directory, nginx_config
 
 PUBLISH_PERIOD_S = 0.1
 """Each driver publishes /cmd_vel at 10 Hz on average."""
@@ -371,16 +370,9 @@ def running_nginx(directory: Path, workers: Sequence[Server], http_port: int,
     directory.mkdir(parents=True, exist_ok=True)
     conf = nginx_config([Worker(HOST, w.http_port, w.ws_port) for w in workers],
                         f"{HOST}:{http_port}", f"{HOST}:{ws_port}")
-    temp = "".join(f"    {kind}_temp_path {directory / kind};\n"
-                   for kind in ("client_body", "proxy", "fastcgi", "uwsgi", "scgi"))
-    conf = conf.replace("http {\n", "http {\n" + temp, 1).replace(
-        "worker_processes auto;", f"worker_processes 1;\nerror_log {directory}/error.log;")
     path = directory / "nginx.conf"
-    path.write_text(conf)
-    directives = f"daemon off; pid {directory / 'nginx.pid'};"
-    if os.geteuid() == 0:
-        directives += " user root;"
-    process = subprocess.Popen([nginx, "-p", str(directory), "-c", str(path), "-g", directives],
+    path.write_text(in_directory(conf, directory))
+    process = subprocess.Popen(foreground_command(nginx, path, directory),
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + 10.0

@@ -45,6 +45,7 @@ from physics.params import PROJECT_DIR
 from ros_nodes.parameters import RobotParameters
 from ros_nodes.topics import ROBOT_TOPICS
 from websim import cli
+from websim.nginx_config import foreground_command, in_directory
 
 from server_process import ServerProcess, free_port, wait_for
 
@@ -323,14 +324,10 @@ def test_the_real_nginx_accepts_the_class_conf(tmp_path: Path) -> None:
     for worker in class_workers():
         assert f"server {worker}:" in conf and f"http://{worker}:" in conf, worker
         conf = conf.replace(f"{worker}:", "127.0.0.1:")
-    temp_paths = "".join(f"    {kind}_temp_path {tmp_path / kind};\n"
-                         for kind in ("client_body", "proxy", "fastcgi", "uwsgi", "scgi"))
     path = tmp_path / "nginx.conf"
-    path.write_text(conf.replace("http {\n", "http {\n" + temp_paths, 1))
-    directives = f"pid {tmp_path / 'nginx.pid'}; error_log {tmp_path / 'error.log'};"
-    result = subprocess.run([NGINX, "-t", "-p", str(tmp_path), "-c", str(path), "-g",
-                             directives], capture_output=True, text=True, timeout=30,
-                            check=False)
+    path.write_text(in_directory(conf, tmp_path))
+    result = subprocess.run(foreground_command(NGINX, path, tmp_path, test=True),
+                            capture_output=True, text=True, timeout=30, check=False)
     assert result.returncode == 0, result.stderr
     assert "test is successful" in result.stderr
 
@@ -592,9 +589,7 @@ def deployment_conf(server: ServerProcess, directory: Path, port: int, htpasswd:
     for old, new in replacements.items():
         assert old in conf, f"nginx.conf no longer contains {old!r}"
         conf = conf.replace(old, new)
-    temp_paths = "".join(f"    {kind}_temp_path {directory / kind};\n"
-                         for kind in ("client_body", "proxy", "fastcgi", "uwsgi", "scgi"))
-    return conf.replace("http {\n", "http {\n" + temp_paths, 1)
+    return in_directory(conf, directory)
 
 
 def write_htpasswd(path: Path, **env: str) -> subprocess.CompletedProcess[str]:
@@ -620,12 +615,8 @@ def nginx(server: ServerProcess, tmp_path_factory: pytest.TempPathFactory) -> It
     port = free_port()
     conf = directory / "nginx.conf"
     conf.write_text(deployment_conf(server, directory, port, htpasswd))
-    # As root, workers would switch to an unprivileged user that cannot read the test's files.
-    directives = f"daemon off; pid {directory / 'nginx.pid'};"
-    if os.geteuid() == 0:
-        directives += " user root;"
     log = (directory / "stderr.log").open("wb")
-    process = subprocess.Popen([NGINX, "-p", str(directory), "-c", str(conf), "-g", directives],
+    process = subprocess.Popen(foreground_command(NGINX, conf, directory),
                                stdout=log, stderr=subprocess.STDOUT)
     running = Nginx(f"http://127.0.0.1:{port}", htpasswd, process)
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 import contextlib
 import itertools
 import json
-import os
 import shutil
 import subprocess
 import urllib.request
@@ -29,7 +28,7 @@ from websockets.exceptions import InvalidStatus
 from websockets.sync.client import ClientConnection
 from websockets.sync.client import connect as connect_sync
 
-from websim.nginx_config import Worker, nginx_config
+from websim.nginx_config import Worker, foreground_command, in_directory, nginx_config
 
 from chromium import skip_reason
 from server_process import ADMIN_TOKEN, ServerProcess, free_port, start_server, wait_for
@@ -64,18 +63,10 @@ def proxy(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Proxy]:
                              str(ws_port)]) for _ in range(2)]
     conf = nginx_config([Worker("127.0.0.1", w.http_port, w.ws_port) for w in workers],
                         f"127.0.0.1:{http_port}", f"127.0.0.1:{ws_port}")
-    temp = "".join(f"    {kind}_temp_path {directory / kind};\n"
-                   for kind in ("client_body", "proxy", "fastcgi", "uwsgi", "scgi"))
-    conf = conf.replace("http {\n", "http {\n" + temp, 1).replace(
-        "worker_processes auto;", f"worker_processes 1;\nerror_log {directory}/error.log;")
     path = directory / "nginx.conf"
-    path.write_text(conf)
-    directives = f"daemon off; pid {directory / 'nginx.pid'};"
-    if os.geteuid() == 0:
-        directives += " user root;"
-    process = subprocess.Popen([str(NGINX), "-p", str(directory), "-c", str(path), "-g",
-                                directives], stdout=subprocess.DEVNULL,
-                               stderr=subprocess.DEVNULL)
+    path.write_text(in_directory(conf, directory))
+    process = subprocess.Popen(foreground_command(str(NGINX), path, directory),
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
     def answers() -> bool:
         if process.poll() is not None:

@@ -17,8 +17,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from dataclasses import dataclass
+from pathlib import Path
 
 from physics import ConfigError
 
@@ -160,6 +162,33 @@ http {{
     }}
 }}
 """
+
+
+TEMP_PATH_KINDS = ("client_body", "proxy", "fastcgi", "uwsgi", "scgi")
+"""nginx's temporary-file directories (compiled into the binary, usually root's)."""
+
+
+def in_directory(conf: str, directory: Path) -> str:
+    """``conf`` with nginx's temporary files under ``directory``: it runs without root.
+
+    For a try-out on a laptop, the tests and the benchmarks.
+    """
+    temp = "".join(f"    {kind}_temp_path {directory / kind};\n" for kind in TEMP_PATH_KINDS)
+    return conf.replace("http {\n", "http {\n" + temp, 1)
+
+
+def foreground_command(nginx: str, conf_path: Path, directory: Path,
+                       test: bool = False) -> list[str]:
+    """The command running nginx on ``conf_path`` in the foreground, logs in ``directory``.
+
+    Its pid file and error log go to ``directory``; ``test``: ``nginx -t``, check the
+    configuration only. As root, its workers stay root, so they can read ``directory``.
+    """
+    directives = f"pid {directory / 'nginx.pid'}; error_log {directory / 'error.log'};"
+    if not test:
+        directives = "daemon off; " + directives + (" user root;" if os.geteuid() == 0 else "")
+    return [nginx, *(["-t"] if test else []), "-p", str(directory), "-c", str(conf_path),
+            "-g", directives]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
