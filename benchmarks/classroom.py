@@ -81,6 +81,7 @@ from bench_server import (
     SUBSCRIBED,
     Client,
     Server,
+    close_clients,
     cpu_seconds,
     expected_frames,
     free_port,
@@ -449,11 +450,7 @@ async def measure(setup: Setup, seconds: float, warmup_s: float) -> dict[str, An
         await asyncio.sleep(warmup_s)
         return await window(setup, clients, drivers, dashboard, seconds)
     finally:
-        for task in tasks:
-            task.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
-        await asyncio.gather(*(client.connection.close() for client in clients),
-                             return_exceptions=True)
+        await close_clients(clients, tasks)
         if dashboard is not None:
             await dashboard.close()
 

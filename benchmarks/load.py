@@ -48,6 +48,7 @@ from bench_server import (
     SUBSCRIBED,
     Client,
     Server,
+    close_clients,
     cpu_seconds,
     expected_frames,
     percentile,
@@ -209,11 +210,7 @@ async def run(server: Server, n_clients: int, seconds: float, soak_s: float,
             row = await window(server, clients, commands, latencies_s, seconds)
             print(json.dumps(row) if as_json else ROW.format(**row), flush=True)
     finally:
-        for task in tasks:
-            task.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
-        await asyncio.gather(*(client.connection.close() for client in clients),
-                             return_exceptions=True)
+        await close_clients(clients, tasks)
 
 
 def main(argv: list[str] | None = None) -> int:
