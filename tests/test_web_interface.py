@@ -33,7 +33,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-from urllib.parse import urlsplit
+from urllib.parse import quote, urlsplit
 
 import pytest
 from websockets.exceptions import ConnectionClosed
@@ -522,6 +522,38 @@ def test_ws_parameter_and_reconnect_after_a_server_restart(browser: Any) -> None
         first.stop()
         if second is not None:
             second.stop()
+
+
+@needs_browser
+def test_a_page_without_ws_drives_the_robot_of_the_server_that_served_it(browser: Any) -> None:
+    """Two servers on one host, neither on 9090: each page dials its own server's bridge
+    (config.json, filled by that server), and its Admin link keeps a ?ws= it was given."""
+    first, second = start_server(), start_server()
+    context = browser.new_context()
+    watch_first, watch_second = Bridge(first.ws_url), Bridge(second.ws_url)
+    try:
+        watch_first.subscribe("/odom")
+        watch_second.subscribe("/odom")
+        page, log = open_page(context, f"{second.http_url}/")
+        wait_connected(page)
+        page.keyboard.down("ArrowUp")
+        wait_for(lambda: watch_second.messages("/odom")
+                 and x_of(watch_second.messages("/odom")[-1]) > 0.05, what="second robot moving")
+        page.keyboard.up("ArrowUp")
+        assert watch_first.messages("/odom") and abs(x_of(watch_first.messages("/odom")[-1])) \
+            < 1e-6, "the page drove the other server's robot"
+        page.goto(page_url(first))  # given a ?ws=: the Admin link keeps it
+        wait_connected(page)
+        page.click("nav a")
+        page.wait_for_url("**/admin?ws=*", timeout=10000)
+        assert urlsplit(page.url).query == f"ws={quote(first.ws_url, safe='')}"
+        assert not log.page_errors, log.page_errors
+    finally:
+        watch_first.close()
+        watch_second.close()
+        context.close()
+        first.stop()
+        second.stop()
 
 
 @needs_browser

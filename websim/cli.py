@@ -114,7 +114,8 @@ def _run_serve(args: argparse.Namespace) -> int:
     token = args.admin_token or secrets.token_urlsafe(16)
     limits, origins = serve_command.limits_from(args), serve_command.origins_from(args)
     if args.class_spec is None:
-        site = sites.single_robot(VirtualRobot(make_simulation(args)), token, limits, origins)
+        site = sites.single_robot(VirtualRobot(make_simulation(args)), token, limits, origins,
+                                  args.public_ws_port or args.ws_port)
         return serve_command.run(args, site, token)
 
     def make_robot(student: Student) -> VirtualRobot:

@@ -39,8 +39,8 @@ class Site:
         front: the WebSocket front.
         banner: lines the banner prints after the URLs.
         robot: the single robot (None for a class).
-        ws_port: the WebSocket port the class's pages are told (``config.json``): the
-            server's own, or a proxy's (``--public-ws-port``).
+        ws_port: the WebSocket port the pages are told (``config.json``): the server's
+            own, or a proxy's (``--public-ws-port``).
         classroom: the class (None for a single robot).
         new_robot_json: ``robot.json`` of a class robot not created yet.
     """
@@ -67,9 +67,13 @@ class Site:
         proxy the page and the WebSocket of one robot may be served by different workers.
         """
         if robot is None:
-            if self.robot is not None:  # one robot: its description; config.json the file
-                return robot_json(self.robot.sim.params, self.robot.sim.lidar.params) \
-                    if name == "robot.json" else None
+            if self.robot is not None:  # one robot: its description, and where its bridge is
+                if name == "robot.json":
+                    return robot_json(self.robot.sim.params, self.robot.sim.lidar.params)
+                url = f"ws://{_url_name(hostname)}:{self.ws_port}/"
+                return json.dumps({"about": "this server's robot, filled by websim serve: "
+                                            "the bridge of the server that served the page",
+                                   "ws": url, "adminWs": url})
             if name == "robot.json":  # a class's root (the dashboard): a class robot's
                 return self.new_robot_json
             url = f"ws://{_url_name(hostname)}:{self.ws_port}/"
@@ -86,9 +90,18 @@ class Site:
 
 
 def single_robot(robot: VirtualRobot, token: str, limits: ClientLimits,
-                 origins: OriginPolicy) -> Site:
-    """Today's websim: one robot at ``ws://HOST:9090/``."""
-    return Site(SimServer(robot, token, limits=limits, origins=origins), robot=robot)
+                 origins: OriginPolicy, ws_port: int = 9090) -> Site:
+    """Today's websim: one robot at ``ws://HOST:9090/``.
+
+    Args:
+        robot: the robot to serve.
+        token: the admin token.
+        limits: the bounds every client lives within.
+        origins: which web pages may connect.
+        ws_port: where the pages are told its bridge is: the server's port, or a proxy's.
+    """
+    return Site(SimServer(robot, token, limits=limits, origins=origins), robot=robot,
+                ws_port=ws_port)
 
 
 def class_roster(spec: str) -> list[Student]:

@@ -6,7 +6,7 @@ import { test } from 'node:test';
 import {
   Connection, defaultWsUrl, initialWsUrl, linkedWsUrl, loadSiteConfig, ownWsUrl, resolveWsUrl,
   retryDelayMs, RETRY_MAX_MS, sameBridge, ServiceCallError, takeToken, tokenFor, TOKEN_KEY,
-  withoutToken, withToken,
+  withoutToken, withPageBridge, withToken,
 } from '../../web-interface/js/connection.js';
 import { fakeRoslib } from './fake-roslib.mjs';
 
@@ -68,6 +68,18 @@ test('the own bridge is config.json\'s or the default, never the address bar\'s 
   assert.equal(linkedWsUrl(linked), 'ws://evil:9090');
   assert.equal(linkedWsUrl({ ...page, search: '?ws=/rosbridge' }), 'ws://lab:8080/rosbridge');
   assert.equal(initialWsUrl(linked, '/admin/rosbridge'), 'ws://evil:9090');
+});
+
+test('links to the other page carry this page\'s ?ws=, and nothing else of its query', () => {
+  const page = { href: 'http://lab:8080/?ws=ws%3A%2F%2Flab%3A9091%2F&token=t', search:
+    '?ws=ws%3A%2F%2Flab%3A9091%2F&token=t' };
+  assert.equal(withPageBridge('admin', page), '/admin?ws=ws%3A%2F%2Flab%3A9091%2F');
+  const admin = { href: 'http://lab:8080/admin?ws=%2Frosbridge', search: '?ws=%2Frosbridge' };
+  assert.equal(withPageBridge('./', admin), '/?ws=%2Frosbridge');
+  const plain = { href: 'http://lab:8080/', search: '' };
+  assert.equal(withPageBridge('admin', plain), 'admin');
+  const robot = { href: 'http://lab:8080/robots/alice/?ws=ws%3A%2F%2Fx', search: '?ws=ws%3A%2F%2Fx' };
+  assert.equal(withPageBridge('admin', robot), '/robots/alice/admin?ws=ws%3A%2F%2Fx');
 });
 
 test('the same bridge: equal once parsed, trailing slash and fragment aside', () => {

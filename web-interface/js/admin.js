@@ -20,7 +20,8 @@ import { LivePlots } from './plots.js';
 import { Readouts } from './readouts.js';
 import { ParametersPanel } from './params-panel.js';
 import {
-  $, closeWithPage, createView, librariesLoaded, robotDescription, showFatal, subscribeRobot,
+  $, closeWithPage, createView, keepBridgeOnNavigation, librariesLoaded, robotDescription,
+  showFatal, subscribeRobot,
 } from './page.js';
 import { bindKeys, Teleop } from './teleop.js';
 
@@ -111,6 +112,7 @@ async function main() {
   });
   bindTokenCard(connection, storage, params);
   closeWithPage(connection);
+  keepBridgeOnNavigation();
   runFrameLoop((now) => view.draw(now), (now) => plots.update(now),
     (now) => readouts.update(now), (now) => bar.update(now, state));
   connection.connect();

@@ -53,6 +53,18 @@ export function linkedWsUrl(location) {
   return value && value.trim() ? resolveWsUrl(value, location) : null;
 }
 
+/**
+ * `href` (a link to another page of this site) carrying this page's ?ws=, so the page it opens
+ * dials the bridge this one was told to; unchanged without one. Same-origin path and query.
+ */
+export function withPageBridge(href, location) {
+  const ws = new URLSearchParams(location.search).get('ws');
+  if (!ws || !ws.trim()) return href;
+  const target = new URL(href, location.href);
+  target.searchParams.set('ws', ws);
+  return `${target.pathname}${target.search}${target.hash}`;
+}
+
 /** The WebSocket URL a page starts with: its ?ws= parameter, else ownWsUrl(). */
 export function initialWsUrl(location, configured = null) {
   return linkedWsUrl(location) ?? ownWsUrl(location, configured);

@@ -8,8 +8,8 @@ import { LivePlots } from './plots.js';
 import { PidPanel } from './pid-panel.js';
 import { Readouts } from './readouts.js';
 import {
-  $, closeWithPage, createTeleop, createView, librariesLoaded, robotDescription, showFatal,
-  subscribeRobot,
+  $, closeWithPage, createTeleop, createView, keepBridgeOnNavigation, librariesLoaded,
+  robotDescription, showFatal, subscribeRobot,
 } from './page.js';
 
 async function main() {
@@ -36,6 +36,7 @@ async function main() {
   teleop.addEventListener('drive', () => pid.stop()); // the student takes over
   pid.addEventListener('start', () => teleop.stop());
   closeWithPage(connection);
+  keepBridgeOnNavigation();
   runFrameLoop((now) => view.draw(now), (now) => plots.update(now),
     (now) => headingPlot.update(now),
     (now) => readouts.update(now), (now) => bar.update(now, state));

@@ -14,6 +14,7 @@ import {
 } from './teleop.js';
 import { speedLimits } from './params.js';
 import { loadRobot, robotLimits } from './robot.js';
+import { withPageBridge } from './connection.js';
 
 export const $ = (selector) => document.querySelector(selector);
 
@@ -111,6 +112,19 @@ export function librariesLoaded() {
 }
 
 /** Closes the connection (a zero velocity command first) when the page goes; reopens it. */
+/**
+ * Make the page's navigation links (`nav a`) carry its ?ws= when followed: the bridge chosen
+ * on one page (in the address, or since, with the Bridge field) is the other page's too.
+ */
+export function keepBridgeOnNavigation(root = document, location = window.location) {
+  for (const anchor of root.querySelectorAll('nav a')) {
+    const href = anchor.getAttribute('href');
+    const follow = () => { anchor.setAttribute('href', withPageBridge(href, location)); };
+    anchor.addEventListener('click', follow);
+    anchor.addEventListener('auxclick', follow);
+  }
+}
+
 export function closeWithPage(connection) {
   window.addEventListener('pagehide', () => connection.close());
   window.addEventListener('pageshow', (event) => {
