@@ -17,6 +17,8 @@ import roslibpy
 from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
+from websim.lan import lan_addresses, qr_lines
+
 from server_process import ADMIN_TOKEN, ServerProcess, free_port, start_server, wait_for
 
 TWIST_03 = {"linear": {"x": 0.3, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
@@ -261,6 +263,23 @@ def test_sigterm_stops_cleanly_and_banner_shows_urls() -> None:
     assert f"ws://localhost:{running.ws_port}/" in output
     assert f"http://localhost:{running.http_port}/admin?token={ADMIN_TOKEN}" in output
     assert "websim: stopped" in output and "Traceback" not in output
+
+
+def test_on_every_interface_the_banner_lists_what_students_type_and_a_qr_code() -> None:
+    running = start_server(["--host", "0.0.0.0"])
+    assert running.stop() == 0
+    output = "".join(running.output)
+    addresses = lan_addresses()
+    assert all(not address.startswith("127.") for address in addresses)
+    if not addresses:  # a machine with loopback only
+        assert "no network address found besides loopback" in output
+        return
+    pages = [f"http://{address}:{running.http_port}/" for address in addresses]
+    assert f"  students:  {'  '.join(pages)}\n" in output
+    code = qr_lines(pages[0])
+    assert "\n".join(f"  {line}" for line in code) in output
+    assert len(code) >= 12 and len({len(line) for line in code}) == 1  # a square of modules
+    assert set("".join(code)) <= set("█▀▄ ")
 
 
 def test_random_admin_token_is_printed_once() -> None:

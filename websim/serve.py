@@ -26,6 +26,7 @@ from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy
 from ros_nodes.rosbridge.schema import NAME_TOKEN
 from ros_nodes.rosbridge.server import SimServer, start_websocket
 from websim.http_server import start_http
+from websim.lan import lan_addresses, qr_lines
 from websim.sites import Site
 
 WEB_DIR = PROJECT_DIR / "web-interface"
@@ -196,6 +197,7 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     if args.host in ("0.0.0.0", "::"):
         print("  listening on every network interface: anyone who can reach this machine can "
               "drive the robot; only the admin token can change its parameters", flush=True)
+        _print_lan_urls(args, robot is not None)
     if not (args.web_dir / "node_modules" / "roslib").is_dir():
         print(f"websim: warning: the page's libraries are not installed in {args.web_dir}; "
               "run: npm ci --prefix web-interface", flush=True)
@@ -212,6 +214,23 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     await http.close()
     print("websim: stopped", flush=True)
     return 0
+
+
+def _print_lan_urls(args: argparse.Namespace, single_robot: bool) -> None:
+    """What students on this machine's networks type (and, for one robot, a QR code of it)."""
+    addresses = lan_addresses()
+    if not addresses:
+        print("  no network address found besides loopback: students on other machines "
+              "cannot reach this one", flush=True)
+        return
+    http_port = args.public_http_port or args.http_port
+    path = "/" if single_robot else "/robots/NAME/"
+    pages = [f"http://{address}:{http_port}{path}" for address in addresses]
+    print(f"  students:  {'  '.join(pages)}", flush=True)
+    if single_robot:
+        print(f"  {pages[0]} as a QR code:", flush=True)
+        for line in qr_lines(pages[0]):
+            print(f"  {line}", flush=True)
 
 
 def freeze_start_up_objects() -> None:
