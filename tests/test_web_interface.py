@@ -468,6 +468,70 @@ def test_scan_points_are_drawn_on_the_walls(server: ServerProcess, bridge: Bridg
     assert scan["y1"] - scan["y0"] > 0.9 * (wall["y1"] - wall["y0"])
 
 
+def _scan_pixels_on_walls(page: Any, tolerance_px: int) -> dict[str, float]:
+    """Of the scan-coloured pixels, the share within ``tolerance_px`` of the walls' bounding
+    box's edges (the empty arena: its four walls are that box)."""
+    return dict(page.evaluate(
+        """([scan, wall, tol]) => {
+          const c = document.querySelector('#view');
+          const data = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+          const near = (i, rgb) => Math.abs(data[i] - rgb[0]) <= 12
+            && Math.abs(data[i + 1] - rgb[1]) <= 12 && Math.abs(data[i + 2] - rgb[2]) <= 12;
+          const box = {x0: 1e9, y0: 1e9, x1: -1, y1: -1};
+          const points = [];
+          for (let i = 0; i < data.length; i += 4) {
+            const p = i / 4, x = p % c.width, y = Math.floor(p / c.width);
+            if (near(i, wall)) {
+              box.x0 = Math.min(box.x0, x); box.x1 = Math.max(box.x1, x);
+              box.y0 = Math.min(box.y0, y); box.y1 = Math.max(box.y1, y);
+            } else if (near(i, scan)) points.push([x, y]);
+          }
+          const onWall = points.filter(([x, y]) => Math.min(Math.abs(x - box.x0),
+            Math.abs(x - box.x1), Math.abs(y - box.y0), Math.abs(y - box.y1)) <= tol).length;
+          return {n: points.length, share: points.length ? onWall / points.length : 0};
+        }""", [list(SCAN_RGB), list(WALL_RGB), tolerance_px]))
+
+
+@needs_browser
+def test_a_turning_robots_scan_is_drawn_on_the_walls(server: ServerProcess, bridge: Bridge,
+                                                     browser: Any) -> None:
+    """At 2 rad/s a scan drawn at the robot's pose of the moment would swing off the walls
+    (the scan is up to a tenth of a second old: ~10 degrees, tens of pixels); drawn at the pose
+    of its stamp, it stays on them."""
+    reset_robot(bridge)
+    context = browser.new_context(viewport={"width": 1280, "height": 860})
+    turning = threading.Event()
+
+    def turn() -> None:
+        while not turning.is_set():
+            bridge.send(op="publish", topic="/cmd_vel", msg={
+                "linear": {"x": 0.0, "y": 0.0, "z": 0.0},
+                "angular": {"x": 0.0, "y": 0.0, "z": 2.0}})
+            turning.wait(0.1)
+
+    driver = threading.Thread(target=turn, daemon=True)
+    try:
+        page, _ = open_page(context, page_url(server))
+        wait_connected(page)
+        driver.start()
+        wait_for(lambda: abs(latest_odom(bridge)["twist"]["twist"]["angular"]["z"] - 2.0) < 1e-6,
+                 what="the robot turning at 2 rad/s")
+        samples = []
+        for _ in range(12):  # frames at different phases of the scan's age
+            page.wait_for_timeout(70)
+            sample = _scan_pixels_on_walls(page, tolerance_px=6)
+            if sample["n"] > 200:
+                samples.append(sample["share"])
+    finally:
+        turning.set()
+        driver.join(timeout=5)
+        bridge.send(op="publish", topic="/cmd_vel", msg={
+            "linear": {"x": 0.0, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}})
+        context.close()
+    assert len(samples) >= 8, samples
+    assert min(samples) >= 0.9, samples
+
+
 @needs_browser
 def test_dead_bridge_shows_a_message_and_the_default_url(server: ServerProcess,
                                                          browser: Any) -> None:

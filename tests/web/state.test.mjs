@@ -4,8 +4,8 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  createState, displayPose, HISTORY_S, onGroundTruth, onOdometry, onWorld, rateHz,
-  TRUTH_STALE_MS,
+  createState, displayPose, HISTORY_S, notePose, onGroundTruth, onOdometry, onWorld, POSE_HISTORY_S,
+  poseAt, rateHz, TRUTH_STALE_MS,
 } from '../../web-interface/js/state.js';
 
 function odometry(x, y, stampS, frame = 'odom') {
@@ -64,4 +64,25 @@ test('a world message bumps the version and the bounds', () => {
   });
   assert.equal(state.worldVersion, 1);
   assert.deepEqual(state.worldBounds, { minX: 1.5, minY: -0.5, maxX: 2.5, maxY: 0.5 });
+});
+
+test('a scan is placed at the pose of its stamp, interpolated, the heading the short way', () => {
+  const state = createState();
+  assert.equal(poseAt(state, 'map', 10), null);
+  notePose(state, 'map', { x: 0, y: 0, theta: 3.0, stampS: 10.0 });
+  notePose(state, 'map', { x: 1, y: 2, theta: -3.0, stampS: 10.1 });  // across ±π
+  const middle = poseAt(state, 'map', 10.05);
+  assert.ok(Math.abs(middle.x - 0.5) < 1e-9 && Math.abs(middle.y - 1) < 1e-9);
+  const turned = Math.atan2(Math.sin(middle.theta), Math.cos(middle.theta));
+  assert.ok(Math.abs(Math.abs(turned) - Math.PI) < 1e-9, `${turned}`);  // not through 0
+  assert.equal(poseAt(state, 'map', 9).stampS, 10.0);  // before the history: the oldest
+  assert.equal(poseAt(state, 'map', 11).stampS, 10.1);  // after it: the newest
+  assert.equal(poseAt(state, 'odom', 10.05), null);  // another frame's history
+  notePose(state, 'map', { x: 0, y: 0, theta: 0, stampS: 20 });
+  notePose(state, 'map', { x: 0, y: 0, theta: 0, stampS: 20 + POSE_HISTORY_S + 1 });
+  assert.equal(state.poses.map.length, 2);  // older than POSE_HISTORY_S: dropped
+  notePose(state, 'map', { x: 5, y: 5, theta: 0, stampS: 1 });  // time went back: restart
+  assert.deepEqual(state.poses.map.map((p) => p.stampS), [1]);
+  notePose(state, 'map', { x: 5, y: 5, theta: 0, stampS: null });  // no stamp: not kept
+  assert.equal(state.poses.map.length, 1);
 });

@@ -20,6 +20,8 @@ export const TRAIL_BREAK_M = 0.5;
 export const TRUTH_STALE_MS = 1000;
 /** Message rates are counted over this window (ms). */
 export const RATE_WINDOW_MS = 2000;
+/** Seconds of stamped poses kept per frame, to draw a scan where it was taken. */
+export const POSE_HISTORY_S = 2;
 
 export function createState() {
   return {
@@ -41,7 +43,39 @@ export function createState() {
       t: [], vCmd: [], vMeas: [], wCmd: [], wMeas: [], headingDeg: [], setpointDeg: [],
     },
     arrivals: new Map(), // stream (robot.json's topic key: odom, scan...) -> arrival times (ms)
+    poses: { map: [], odom: [] }, // per frame, the recent stamped poses, oldest first
   };
+}
+
+/** Notes a stamped pose of `frame`; keeps the last POSE_HISTORY_S of them (by stamp). */
+export function notePose(state, frame, pose) {
+  if (!Number.isFinite(pose.stampS)) return;
+  const poses = state.poses[frame];
+  if (poses.length && pose.stampS < poses[poses.length - 1].stampS) poses.length = 0; // reset
+  poses.push(pose);
+  while (poses.length > 2 && poses[0].stampS < pose.stampS - POSE_HISTORY_S) poses.shift();
+}
+
+/**
+ * The pose of `frame` at time `stampS` (s), interpolated between the two stamped poses around
+ * it (the heading along the shorter arc), as rviz2 looks up TF at a message's stamp; the
+ * nearest one outside the history; null without any. A scan is drawn at the pose it was
+ * taken from, not where the robot is by the time it is drawn.
+ */
+export function poseAt(state, frame, stampS) {
+  const poses = state.poses[frame] ?? [];
+  if (!poses.length || !Number.isFinite(stampS)) return null;
+  if (stampS <= poses[0].stampS) return poses[0];
+  const last = poses[poses.length - 1];
+  if (stampS >= last.stampS) return last;
+  let i = poses.length - 1;
+  while (poses[i - 1].stampS > stampS) i -= 1;
+  const a = poses[i - 1];
+  const b = poses[i];
+  const f = (stampS - a.stampS) / (b.stampS - a.stampS);
+  const turn = Math.atan2(Math.sin(b.theta - a.theta), Math.cos(b.theta - a.theta));
+  return { ...b, x: a.x + f * (b.x - a.x), y: a.y + f * (b.y - a.y), theta: a.theta + f * turn,
+    stampS };
 }
 
 /** Counts one message of `stream` (odom, scan, ground_truth: robot.json's topic keys). */
@@ -75,6 +109,7 @@ export function onOdometry(state, msg, nowMs) {
   if (!pose) return;
   state.odom = pose;
   state.odomAtMs = nowMs;
+  notePose(state, 'odom', pose);
   noteArrival(state, 'odom', nowMs);
   recordHistory(state, pose);
   if (displayPose(state, nowMs).frame === 'odom') extendTrail(state, pose, 'odom', nowMs);
@@ -85,6 +120,7 @@ export function onGroundTruth(state, msg, nowMs) {
   if (!pose) return;
   state.truth = pose;
   state.truthAtMs = nowMs;
+  notePose(state, 'map', pose);
   noteArrival(state, 'ground_truth', nowMs);
   extendTrail(state, pose, 'map', nowMs);
 }

@@ -6,7 +6,7 @@
 // walls are drawn once into an offscreen layer (again only when the world or the zoom changes)
 // and copied each frame.
 
-import { displayPose, TRAIL_S } from './state.js';
+import { displayPose, poseAt, TRAIL_S } from './state.js';
 import { composePose } from './ros-msgs.js';
 
 const WHEEL_WIDTH_M = 0.025; // drawn only: the model has no wheel width
@@ -117,7 +117,7 @@ export class View {
     this._drawAxes();
     this._drawTrail(nowMs);
     if (pose) {
-      this._drawScan(pose);
+      this._drawScan(poseAt(state, frame, state.scan?.stampS) ?? pose);
       this._drawRobot(pose);
     }
     this._drawScaleBar();
@@ -249,6 +249,7 @@ export class View {
     });
   }
 
+  /** The scan, from the laser at `pose`: the robot's pose when the scan was taken. */
   _drawScan(pose) {
     const { ctx, state } = this;
     if (!state.scan) return;
