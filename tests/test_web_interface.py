@@ -346,6 +346,11 @@ def test_holding_arrow_up_drives_and_releasing_stops(server: ServerProcess, brid
         commands = twist_pairs(bridge.messages("/cmd_vel")[commands_before:])
         screenshot(page, "main-after-drive.png")
         assert log.console_errors == [] and log.page_errors == []
+        # The press and the release were timed to the odometry showing them: a tick or so.
+        command_ms = float(wait_for(lambda: (text := page.text_content(
+            'output[data-readout="cmdLatency"]')) not in (None, "–") and text,
+            what="the cmd -> odom readout"))
+        assert 1 <= command_ms <= 500, command_ms
     assert speed_of(moving) == pytest.approx(speed_mps)
     # About 1 s at that speed: the key was held 1 s after the first motion, plus latency.
     assert 0.8 * speed_mps < x_of(stopped) < 1.7 * speed_mps

@@ -8,6 +8,7 @@ import {
 } from './state.js';
 import { twistValues } from './ros-msgs.js';
 import { noteCommand, noteOwnCommand } from './drivers.js';
+import { noteCommandSent } from './latency.js';
 import { View } from './view.js';
 import {
   bindButtons, bindJoystick, bindKeys, bindSpeedSliders, Teleop,
@@ -37,7 +38,10 @@ export function subscribeRobot(connection, state, robot) {
   });
   connection.addEventListener('published', (event) => { // teleop, joystick, PID, stop
     const { topic, msg } = event.detail;
-    if (topic === robot.topics.cmd_vel.name) noteOwnCommand(state.drivers, msg, now());
+    if (topic !== robot.topics.cmd_vel.name) return;
+    noteOwnCommand(state.drivers, msg, now());
+    const { linear, angular } = twistValues(msg);
+    noteCommandSent(state.latency, linear, angular, now());
   });
   connection.addEventListener('connected', () => clearTrail(state));
 }

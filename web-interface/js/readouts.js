@@ -1,6 +1,8 @@
-// The numbers under the view: pose, velocities, stamp time, message rates, round-trip latency.
+// The numbers under the view: pose, velocities, stamp time, message rates, the command-to-
+// odometry latency and the bridge's round trip.
 
 import { rateHz } from './state.js';
+import { latencyMs } from './latency.js';
 
 const REFRESH_MS = 100;
 /** How often the round trip is timed: a cheap service call, answered by the bridge itself. */
@@ -9,8 +11,8 @@ const LATENCY_PERIOD_MS = 2000;
 export class Readouts {
   /**
    * @param {HTMLElement} root holds <output data-readout="NAME"> elements: x, y, theta, v,
-   *   omega, time, odomRate, scanRate, latency (any may be absent)
-   * @param {object} robot the robot description (robot.js): the topic the latency probe asks about
+   *   omega, time, odomRate, scanRate, cmdLatency, roundTrip (any may be absent)
+   * @param {object} robot the robot description (robot.js): the topic the round trip asks about
    */
   constructor(connection, state, root, robot) {
     this.connection = connection;
@@ -18,11 +20,11 @@ export class Readouts {
     this.probeTopic = robot.topics.odom.name;
     this.out = Object.fromEntries(
       [...root.querySelectorAll('[data-readout]')].map((el) => [el.dataset.readout, el]));
-    this.latencyMs = null;
+    this.roundTripMs = null;
     this.lastMs = -Infinity;
     setInterval(() => this._timeRoundTrip(), LATENCY_PERIOD_MS);
     connection.addEventListener('connected', () => this._timeRoundTrip());
-    connection.addEventListener('disconnected', () => { this.latencyMs = null; });
+    connection.addEventListener('disconnected', () => { this.roundTripMs = null; });
   }
 
   update(nowMs) {
@@ -39,7 +41,9 @@ export class Readouts {
     this._set('time', fresh && odom.stampS !== null ? clock(odom.stampS) : '–');
     this._set('odomRate', rateHz(this.state, 'odom', nowMs).toFixed(0));
     this._set('scanRate', rateHz(this.state, 'scan', nowMs).toFixed(0));
-    this._set('latency', this.latencyMs === null ? '–' : this.latencyMs.toFixed(0));
+    const commandMs = latencyMs(this.state.latency);
+    this._set('cmdLatency', commandMs === null ? '–' : commandMs.toFixed(0));
+    this._set('roundTrip', this.roundTripMs === null ? '–' : this.roundTripMs.toFixed(0));
   }
 
   _set(name, text) {
@@ -53,9 +57,9 @@ export class Readouts {
     try {
       await this.connection.callService('/rosapi/topic_type', 'rosapi_msgs/srv/TopicType',
         { topic: this.probeTopic }, LATENCY_PERIOD_MS);
-      this.latencyMs = performance.now() - start;
+      this.roundTripMs = performance.now() - start;
     } catch {
-      this.latencyMs = null; // no rosapi on this bridge: nothing to show
+      this.roundTripMs = null; // no rosapi on this bridge: nothing to show
     }
   }
 }

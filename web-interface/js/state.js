@@ -7,6 +7,7 @@ import {
   applyMarkerArray, markerBounds, poseFromOdometry, scanPoints, transformFromTf,
 } from './ros-msgs.js';
 import { createDrivers } from './drivers.js';
+import { createLatency, noteOdometry } from './latency.js';
 
 /** Seconds of history the live plots show. */
 export const HISTORY_S = 20;
@@ -44,6 +45,7 @@ export function createState() {
     },
     arrivals: new Map(), // stream (robot.json's topic key: odom, scan...) -> arrival times (ms)
     poses: { map: [], odom: [] }, // per frame, the recent stamped poses, oldest first
+    latency: createLatency(), // the page's commands until odometry shows them (latency.js)
   };
 }
 
@@ -110,6 +112,7 @@ export function onOdometry(state, msg, nowMs) {
   state.odom = pose;
   state.odomAtMs = nowMs;
   notePose(state, 'odom', pose);
+  noteOdometry(state.latency, pose.v, pose.omega, nowMs);
   noteArrival(state, 'odom', nowMs);
   recordHistory(state, pose);
   if (displayPose(state, nowMs).frame === 'odom') extendTrail(state, pose, 'odom', nowMs);
