@@ -18,6 +18,7 @@ from typing import Any
 
 import yaml
 
+from physics.shipped import CHECKOUT_DIR, shipped
 from physics.validation import (
     ConfigError,
     as_float_in_range,
@@ -26,10 +27,11 @@ from physics.validation import (
     fail,
 )
 
-PROJECT_DIR = Path(__file__).resolve().parent.parent
-"""The checkout (or editable install) that holds ``config/`` and ``worlds/``."""
+PROJECT_DIR = CHECKOUT_DIR
+"""The checkout (or editable install); installed from a wheel, site-packages (see
+``physics.shipped``)."""
 
-SHIPPED_PARAMS_FILE = PROJECT_DIR / "config" / "pi4b_params.yaml"
+SHIPPED_PARAMS_FILE = shipped("physics", "config") / "pi4b_params.yaml"
 """The Pi 4B parameter file whose values are every dataclass default."""
 
 NO_RETURN_POLICIES = ("range_max", "inf")

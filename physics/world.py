@@ -27,7 +27,7 @@ from typing import Any
 
 import yaml
 
-from physics.params import PROJECT_DIR
+from physics.shipped import shipped
 from physics.snapshots import Pose2D
 from physics.validation import (
     ConfigError,
@@ -39,7 +39,7 @@ from physics.validation import (
     fail,
 )
 
-WORLDS_DIR = PROJECT_DIR / "worlds"
+WORLDS_DIR = shipped("physics", "worlds")
 """Where the shipped worlds live; ``load_world("maze")`` looks here."""
 
 MIN_WALL_LENGTH_M = 1e-6

@@ -95,20 +95,22 @@ def limit_open_files(limit: int) -> None:
 
 
 def start_server(extra_args: Sequence[str] = (), ws_port: int | None = None,
-                 http_port: int | None = None,
-                 open_files: int | None = None) -> ServerProcess:
-    """Launch ``websim serve`` (as ``python -m websim.cli``) and wait until it is healthy.
+                 http_port: int | None = None, open_files: int | None = None,
+                 launcher: Sequence[str] = (sys.executable, "-m", "websim.cli"),
+                 cwd: str | None = None) -> ServerProcess:
+    """Launch ``websim serve`` (``launcher``: ``python -m websim.cli``) and wait until healthy.
 
-    ``open_files`` limits the server process to that many file descriptors (soft and hard).
+    ``open_files`` limits the server process to that many file descriptors (soft and hard);
+    ``cwd``: the folder it runs in (default this one).
     """
     ws_port = ws_port or free_port()
     http_port = http_port or free_port()
-    command = [sys.executable, "-m", "websim.cli", "serve", "--ws-port", str(ws_port),
-               "--http-port", str(http_port), "--admin-token", ADMIN_TOKEN, *extra_args]
+    command = [*launcher, "serve", "--ws-port", str(ws_port), "--http-port", str(http_port),
+               "--admin-token", ADMIN_TOKEN, *extra_args]
     preexec = None if open_files is None else functools.partial(limit_open_files, open_files)
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-                               preexec_fn=preexec)
+                               preexec_fn=preexec, cwd=cwd)
     server = ServerProcess(ws_port, http_port, process)
 
     def healthy() -> bool:

@@ -30,12 +30,10 @@ import gzip
 import json
 import logging
 import os
-import re
 import stat
 from collections import OrderedDict
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
-from fnmatch import fnmatch
 from pathlib import Path
 from typing import Any, Protocol
 from urllib.parse import urlsplit
@@ -43,36 +41,12 @@ from urllib.parse import urlsplit
 from aiohttp import web
 from aiohttp.abc import AbstractAccessLogger
 
+from websim.web_files import CONTENT_TYPES, published
+
 log = logging.getLogger("websim.http")
 
 PAGE_ROUTES = {"/": "index.html", "/admin": "admin.html", "/class": "class.html"}
 """Clean URLs the course uses, mapped to files of the web folder."""
-
-TOP_LEVEL_FILES = ("*.html", "favicon.svg", "config.json")
-"""Files published from the top of the web folder: the pages (also a page copied there, as
-``examples/roslibjs_page.html`` says; the Docker image copies ``*.html`` too), the icon and
-the site's settings. ``robot.json`` is not a file here: it is answered live."""
-
-PUBLISHED_TREES = ("css", "js", "node_modules/roslib/build", "node_modules/nipplejs/dist",
-                   "node_modules/uplot/dist")
-"""Folders published with everything below them: the pages' own styles and modules, and the
-built files of the libraries the pages load (``index.html``, ``admin.html``, ``js/vendor.js``),
-not the libraries' sources or package files."""
-
-CONTENT_TYPES = {
-    ".html": "text/html; charset=utf-8",
-    ".js": "text/javascript; charset=utf-8",
-    ".mjs": "text/javascript; charset=utf-8",
-    ".css": "text/css; charset=utf-8",
-    ".json": "application/json",
-    ".map": "application/json",
-    ".svg": "image/svg+xml",
-    ".png": "image/png",
-    ".ico": "image/x-icon",
-    ".woff2": "font/woff2",
-}
-"""The only file types published, with their MIME types (not the system's mime.types, which
-differ between machines: module scripts must be a JavaScript type or the browser refuses)."""
 
 COMPRESSIBLE = frozenset({".html", ".js", ".mjs", ".css", ".json", ".map", ".svg"})
 
@@ -82,10 +56,6 @@ GZIP_MIN_BYTES = 1024
 GZIP_LEVEL = 5
 """zlib level: the largest file (uPlot, 145 kB) in ~3 ms on the loop, within 2 % of level 9's
 size; once per file and change."""
-
-SEGMENT = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]*")
-"""One path segment of a published file: no dotfile, ``.``, ``..``, empty segment (a
-directory's trailing slash), backslash, NUL or other oddity."""
 
 ROBOTS_PREFIX = "/robots/"
 """A class's robot pages: ``/robots/NAME/`` is the page, ``/robots/NAME/admin`` its admin."""
@@ -124,7 +94,7 @@ UNLIMITED_FILES = 1 << 16
 """The open-file limit assumed where there is none (Windows, or RLIM_INFINITY)."""
 
 
-def open_published(web_dir: str, url_path: str) -> tuple[int, str] | None:
+def openpublished(web_dir: str, url_path: str) -> tuple[int, str] | None:
     """Open the published file a URL path names; None when there is none (then: 404).
 
     The URL must name an allow-listed file of a published type, and so must the real path of
@@ -140,7 +110,7 @@ def open_published(web_dir: str, url_path: str) -> tuple[int, str] | None:
         ``web_dir`` (``/``-separated).
     """
     relative = PAGE_ROUTES.get(url_path, url_path.removeprefix("/"))
-    if not _published(relative):
+    if not published(relative):
         return None
     candidate = os.path.join(web_dir, relative)
     try:  # O_NONBLOCK: a FIFO planted in the folder opens instead of blocking the loop
@@ -151,7 +121,7 @@ def open_published(web_dir: str, url_path: str) -> tuple[int, str] | None:
         real = _real_path(fd, candidate)
         inside = real.startswith(web_dir + os.sep)
         real_relative = real[len(web_dir) + 1:].replace(os.sep, "/")
-        if inside and _published(real_relative) and stat.S_ISREG(os.fstat(fd).st_mode):
+        if inside and published(real_relative) and stat.S_ISREG(os.fstat(fd).st_mode):
             return fd, real_relative
     except OSError:
         pass
@@ -165,18 +135,6 @@ def _real_path(fd: int, opened_as: str) -> str:
         return os.readlink(f"/proc/self/fd/{fd}")
     except OSError:  # no /proc (macOS): resolve the name, as the open just did
         return os.path.realpath(opened_as)
-
-
-def _published(relative: str) -> bool:
-    """Whether a path relative to the web folder is on the allow-list (by name only)."""
-    segments = relative.split("/")
-    if not all(SEGMENT.fullmatch(segment) for segment in segments):
-        return False
-    if os.path.splitext(relative)[1] not in CONTENT_TYPES:
-        return False
-    if len(segments) == 1:
-        return any(fnmatch(relative, pattern) for pattern in TOP_LEVEL_FILES)
-    return any(relative.startswith(tree + "/") for tree in PUBLISHED_TREES)
 
 
 def raise_open_file_limit() -> int:
@@ -424,7 +382,7 @@ class HttpServer:
 
     def _asset(self, url_path: str) -> _Asset | None:
         """The published file ``url_path`` names, reread when changed (inode, mtime, size)."""
-        opened = open_published(self._web_dir, url_path)
+        opened = openpublished(self._web_dir, url_path)
         if opened is None:
             return None
         fd, relative = opened

@@ -20,7 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol
 
-from physics.params import PROJECT_DIR
+from physics.shipped import shipped
 from ros_nodes.rosbridge.classroom import DEFAULT_IDLE_PAUSE_S, DEFAULT_MAX_ROBOTS
 from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy
 from ros_nodes.rosbridge.schema import NAME_TOKEN
@@ -29,7 +29,7 @@ from websim.http_server import start_http
 from websim.lan import lan_addresses, qr_lines
 from websim.sites import Site
 
-WEB_DIR = PROJECT_DIR / "web-interface"
+WEB_DIR = shipped("websim", "web-interface")
 """The static frontend."""
 
 log = logging.getLogger("websim.serve")

@@ -1,0 +1,62 @@
+"""The wheel carries what ``websim serve`` needs besides the code: robot parameters, worlds and
+the page with its third-party JavaScript, so an installed websim runs from any folder, offline.
+
+``pyproject.toml`` holds the project's metadata; this file only adds that build step. The page's
+libraries (roslib, uPlot, nipplejs) are the committed npm lock's: installed with ``npm ci`` when
+``web-interface/node_modules`` is missing or older than the lock (so building needs Node then;
+installing the wheel never does). Which files of the page are carried is the page server's own
+allow-list (``websim/web_files.py``). An editable install copies nothing: the checkout serves.
+"""
+
+from __future__ import annotations
+
+import runpy
+import shutil
+import subprocess
+from pathlib import Path
+
+from setuptools import setup
+from setuptools.command.build_py import build_py
+
+ROOT = Path(__file__).resolve().parent
+WEB_DIR = ROOT / "web-interface"
+WEB_FILES = runpy.run_path(str(ROOT / "websim" / "web_files.py"))
+
+
+def vendor_libraries() -> None:
+    """``npm ci`` in web-interface/ unless its node_modules is the committed lock's already."""
+    lock = WEB_DIR / "package-lock.json"
+    installed = WEB_DIR / "node_modules" / ".package-lock.json"
+    if installed.is_file() and installed.stat().st_mtime >= lock.stat().st_mtime:
+        return
+    npm = shutil.which("npm")
+    if npm is None:
+        raise SystemExit("building the websim wheel: the page's libraries are not installed "
+                         "and npm is not on PATH: install Node, or run "
+                         "'npm ci --prefix web-interface', then build again")
+    subprocess.run([npm, "ci", "--omit=dev", "--ignore-scripts", "--no-audit", "--no-fund"],
+                   cwd=WEB_DIR, check=True)
+
+
+class BuildWithShippedFiles(build_py):
+    """``build_py``, then the shipped files into ``physics/_share`` and ``websim/_share``."""
+
+    def run(self) -> None:
+        super().run()
+        if getattr(self, "editable_mode", False):
+            return
+        vendor_libraries()
+        build = Path(self.build_lib)
+        for folder in ("config", "worlds"):
+            target = build / "physics" / "_share" / folder
+            target.mkdir(parents=True, exist_ok=True)
+            for source in sorted((ROOT / folder).glob("*.yaml")):
+                shutil.copy2(source, target / source.name)
+        web_target = build / "websim" / "_share" / "web-interface"
+        for relative in WEB_FILES["published_files"](WEB_DIR):
+            destination = web_target / relative
+            destination.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(WEB_DIR / relative, destination)
+
+
+setup(cmdclass={"build_py": BuildWithShippedFiles})
