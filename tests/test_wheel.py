@@ -130,7 +130,7 @@ def test_a_roslibpy_client_drives_the_installed_server(server: ServerProcess) ->
         wait_for(lambda: received, timeout_s=10, what="/odom from the installed server")
         assert received[-1]["header"]["frame_id"] == "odom"
     finally:
-        client.terminate()
+        client.close()  # not terminate(): that stops the one Twisted reactor of the process
 
 
 def test_worlds_load_by_name_from_the_installed_package(installed: Installed) -> None:
