@@ -1,5 +1,7 @@
-"""The wheel carries what ``websim serve`` needs besides the code: robot parameters, worlds and
-the page with its third-party JavaScript, so an installed websim runs from any folder, offline.
+"""The build step that makes the wheel carry what ``websim serve`` needs besides the code.
+
+Robot parameters, worlds and the page with its third-party JavaScript, so an installed websim
+runs from any folder, offline.
 
 ``pyproject.toml`` holds the project's metadata; this file only adds that build step. The page's
 libraries (roslib, uPlot, nipplejs) are the committed npm lock's: installed with ``npm ci`` when
@@ -42,6 +44,7 @@ class BuildWithShippedFiles(build_py):
     """``build_py``, then the shipped files into ``physics/_share`` and ``websim/_share``."""
 
     def run(self) -> None:
+        """Build the packages, then copy the shipped files next to them (not when editable)."""
         super().run()
         if getattr(self, "editable_mode", False):
             return
