@@ -73,6 +73,27 @@ class Wall:
 
 
 @dataclass(frozen=True)
+class BoxObstacle:
+    """A solid rectangle in the map frame (its sides are also walls, for the physics).
+
+    Attributes:
+        x: centre x (m).
+        y: centre y (m).
+        width_m: size along its own x axis (m).
+        height_m: size along its own y axis (m).
+        yaw_rad: its rotation (rad).
+        origin: the file entry it came from, e.g. ``"boxes[0]"``.
+    """
+
+    x: float
+    y: float
+    width_m: float
+    height_m: float
+    yaw_rad: float
+    origin: str
+
+
+@dataclass(frozen=True)
 class CircleObstacle:
     """A solid disc in the map frame.
 
@@ -99,6 +120,7 @@ class World:
         walls: every wall segment, boxes and polylines included.
         circles: every solid disc.
         source: the file it was loaded from (or a label), for error messages.
+        boxes: every solid rectangle (as walls already; kept for drawing them filled).
     """
 
     name: str
@@ -106,6 +128,7 @@ class World:
     walls: tuple[Wall, ...]
     circles: tuple[CircleObstacle, ...]
     source: str
+    boxes: tuple[BoxObstacle, ...] = ()
 
     @property
     def bounds(self) -> tuple[float, float, float, float]:
@@ -165,23 +188,24 @@ def world_from_dict(document: Any, *, source: str = "<world>") -> World:
         walls.append(_checked_wall(source, Wall(x1, y1, x2, y2, where)))
     for index, entry in enumerate(_as_list(source, top, "polylines")):
         walls += _polyline_walls(source, f"polylines[{index}]", entry)
-    boxes = [_box_corners(source, f"boxes[{index}]", entry)
+    boxes = [_box(source, f"boxes[{index}]", entry)
              for index, entry in enumerate(_as_list(source, top, "boxes"))]
-    for where, corners in boxes:
+    for box in boxes:
+        where, corners = box.origin, _corners(box)
         for side in range(4):
             (ax, ay), (bx, by) = corners[side], corners[(side + 1) % 4]
             walls.append(Wall(ax, ay, bx, by, where))
     circles = [_circle(source, f"circles[{index}]", entry)
                for index, entry in enumerate(_as_list(source, top, "circles"))]
 
-    for where, corners in boxes:
-        if _inside_convex(corners, start.x, start.y):
-            raise fail(f"{source}: start", f"{list(start)} is inside the box {where}")
+    for box in boxes:
+        if _inside_convex(_corners(box), start.x, start.y):
+            raise fail(f"{source}: start", f"{list(start)} is inside the box {box.origin}")
     for circle in circles:
         if math.hypot(start.x - circle.x, start.y - circle.y) < circle.radius_m:
             raise fail(f"{source}: start", f"{list(start)} is inside the circle {circle.origin}")
     return World(name=name, start=start, walls=tuple(walls), circles=tuple(circles),
-                 source=source)
+                 source=source, boxes=tuple(boxes))
 
 
 def _as_list(source: str, top: Any, key: str) -> list[Any]:
@@ -218,7 +242,7 @@ def _polyline_walls(source: str, where: str, entry: Any) -> list[Wall]:
             for i, (a, b) in enumerate(itertools.pairwise(points))]
 
 
-def _box_corners(source: str, where: str, entry: Any) -> tuple[str, list[tuple[float, float]]]:
+def _box(source: str, where: str, entry: Any) -> BoxObstacle:
     mapping = as_mapping(f"{source}: {where}", entry)
     check_keys(f"{source}: {where}", mapping, ("center", "size", "yaw"))
     cx, cy = as_number_list(f"{source}: {where}.center", mapping.get("center"), 2)
@@ -227,12 +251,17 @@ def _box_corners(source: str, where: str, entry: Any) -> tuple[str, list[tuple[f
         if value <= 0.0:
             raise fail(f"{source}: {where}.size", f"{label} must be > 0, got {value!r}")
     yaw = as_finite_float(f"{source}: {where}.yaw", mapping.get("yaw", 0.0))
-    cos_yaw, sin_yaw = math.cos(yaw), math.sin(yaw)
+    return BoxObstacle(cx, cy, width, height, yaw, where)
+
+
+def _corners(box: BoxObstacle) -> list[tuple[float, float]]:
+    """The box's corners, counter-clockwise."""
+    cos_yaw, sin_yaw = math.cos(box.yaw_rad), math.sin(box.yaw_rad)
     corners = []
     for ux, uy in ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)):
-        dx, dy = ux * width, uy * height
-        corners.append((cx + cos_yaw * dx - sin_yaw * dy, cy + sin_yaw * dx + cos_yaw * dy))
-    return where, corners
+        dx, dy = ux * box.width_m, uy * box.height_m
+        corners.append((box.x + cos_yaw * dx - sin_yaw * dy, box.y + sin_yaw * dx + cos_yaw * dy))
+    return corners
 
 
 def _circle(source: str, where: str, entry: Any) -> CircleObstacle:

@@ -178,6 +178,7 @@ def tf_msg(transforms: Sequence[Message]) -> Message:
 
 MARKER_LINE_LIST = 5
 MARKER_CYLINDER = 3
+MARKER_CUBE = 1
 MARKER_ADD = 0
 
 
@@ -200,7 +201,11 @@ WALL_LINE_WIDTH_M = 0.02
 
 
 def world_markers_msg(world: World, time_s: float) -> Message:
-    """``visualization_msgs/MarkerArray``: the walls as one LINE_LIST, each disc a CYLINDER."""
+    """``visualization_msgs/MarkerArray`` of the world, in ``map``.
+
+    The walls as one LINE_LIST, each disc a CYLINDER, each box a CUBE (drawn filled; its
+    sides are in the LINE_LIST too).
+    """
     identity = {"position": vector3(), "orientation": yaw_quaternion(0.0)}
     points = []
     for wall in world.walls:
@@ -212,6 +217,10 @@ def world_markers_msg(world: World, time_s: float) -> Message:
         size = 2.0 * disc.radius_m
         markers.append(_marker(time_s, index, MARKER_CYLINDER, pose, vector3(size, size, 0.3),
                                WALL_COLOR, []))
+    for index, box in enumerate(world.boxes, start=1 + len(world.circles)):
+        pose = {"position": vector3(box.x, box.y), "orientation": yaw_quaternion(box.yaw_rad)}
+        markers.append(_marker(time_s, index, MARKER_CUBE, pose,
+                               vector3(box.width_m, box.height_m, 0.3), WALL_COLOR, []))
     return {"markers": markers}
 
 

@@ -9,6 +9,7 @@ import pytest
 
 from physics import ConfigError, Simulation, load_world
 from physics.world import world_from_dict
+from ros_nodes.messages import MARKER_CUBE, world_markers_msg
 
 from conftest import SHIPPED_WORLDS
 
@@ -62,6 +63,21 @@ def test_boxes_polylines_and_circles() -> None:
     assert world.start.theta == math.pi / 2
     sim = Simulation(world, seed=0)
     assert sim.scan().ranges[180] == pytest.approx(2.5, abs=1e-9)
+    solid, = world.boxes  # kept whole too, for drawing it filled
+    assert (solid.x, solid.y, solid.width_m, solid.height_m, solid.yaw_rad) == \
+        (-3, 0, 2, 1, math.pi / 2)
+
+
+def test_the_world_message_carries_each_box_as_a_cube() -> None:
+    world = load_world("maze")
+    markers = world_markers_msg(world, 0.0)["markers"]
+    cubes = [m for m in markers if m["type"] == MARKER_CUBE]
+    assert len(cubes) == len(world.boxes) >= 1
+    box, cube = world.boxes[0], cubes[0]
+    assert (cube["pose"]["position"]["x"], cube["pose"]["position"]["y"]) == (box.x, box.y)
+    assert (cube["scale"]["x"], cube["scale"]["y"]) == (box.width_m, box.height_m)
+    assert cube["pose"]["orientation"]["z"] == pytest.approx(math.sin(box.yaw_rad / 2))
+    assert len({m["id"] for m in markers}) == len(markers)  # one id each
 
 
 def write(tmp_path: Path, text: str) -> Path:

@@ -102,6 +102,27 @@ test('world markers: LINE_LIST point pairs are walls, CYLINDERs are discs', () =
   assert.equal(markerBounds(markers), null);
 });
 
+test('world markers: a CUBE is a box, its corners turned by its yaw', () => {
+  const markers = new Map();
+  applyMarkerArray(markers, {
+    markers: [{
+      ns: 'world', id: 2, type: MARKER.CUBE, action: MARKER.ADD,
+      pose: { position: { x: 2, y: 1, z: 0 }, orientation: yawQuaternion(Math.PI / 2) },
+      scale: { x: 0.4, y: 0.2, z: 0.3 },
+    }],
+  });
+  const box = markers.get('world/2');
+  assert.equal(box.kind, 'polygon');
+  const expected = [[2.1, 0.8], [2.1, 1.2], [1.9, 1.2], [1.9, 0.8]]; // 0.4 along y once turned
+  box.corners.forEach(([x, y], i) => {
+    close(x, expected[i][0]);
+    close(y, expected[i][1]);
+  });
+  const bounds = markerBounds(markers);
+  close(bounds.minX, 1.9);
+  close(bounds.maxY, 1.2);
+});
+
 test('a marker pose moves and turns its points', () => {
   const markers = applyMarkerArray(new Map(), {
     markers: [{

@@ -4,7 +4,9 @@
 // non-finite float as null, so every number read here may be null.
 
 /** visualization_msgs/Marker type and action codes. */
-export const MARKER = Object.freeze({ CYLINDER: 3, LINE_LIST: 5, ADD: 0, DELETE: 2, DELETEALL: 3 });
+export const MARKER = Object.freeze({
+  CUBE: 1, CYLINDER: 3, LINE_LIST: 5, ADD: 0, DELETE: 2, DELETEALL: 3,
+});
 
 /** rcl_interfaces/msg/ParameterValue's field per ParameterType (robot.json has the codes). */
 const PARAMETER_FIELDS = Object.freeze({
@@ -114,7 +116,8 @@ export function composePose(pose, offset) {
 
 /**
  * Applies a visualization_msgs/MarkerArray to `markers` (a Map of "ns/id" -> shape) and
- * returns it: LINE_LIST markers become wall segments, CYLINDER markers discs; DELETE and
+ * returns it: LINE_LIST markers become wall segments, CYLINDER markers discs, CUBE markers
+ * boxes (filled rectangles, their yaw kept); DELETE and
  * DELETEALL remove. Other marker types are ignored. Shapes are in the marker's frame (the
  * world publishes in map), marker pose applied.
  */
@@ -136,6 +139,14 @@ export function applyMarkerArray(markers, msg) {
     } else if (marker.type === MARKER.CYLINDER) {
       const pose = markerPose(marker);
       markers.set(key, { kind: 'disc', x: pose.x, y: pose.y, radius: (marker.scale?.x || 0) / 2 });
+    } else if (marker.type === MARKER.CUBE) {
+      const pose = markerPose(marker);
+      const [w, h] = [(marker.scale?.x || 0) / 2, (marker.scale?.y || 0) / 2];
+      const corners = [[-w, -h], [w, -h], [w, h], [-w, h]].map(([x, y]) => {
+        const corner = composePose(pose, { x, y, yaw: 0 });
+        return [corner.x, corner.y];
+      });
+      markers.set(key, { kind: 'polygon', corners });
     }
   }
   return markers;
@@ -164,6 +175,8 @@ export function markerBounds(markers) {
         grow(x1, y1);
         grow(x2, y2);
       }
+    } else if (shape.kind === 'polygon') {
+      for (const [x, y] of shape.corners) grow(x, y);
     } else {
       grow(shape.x, shape.y, shape.radius);
     }

@@ -392,9 +392,8 @@ export class View {
   }
 }
 
-/** Draws the world's walls and discs with `toScreen(x, y) -> [sx, sy]` at `scale` px/m. */
 /**
- * The world's walls and discs (ros-msgs.js applyMarkerArray shapes) at `scale` px/m; walls are
+ * The world's walls, discs and boxes (ros-msgs.js applyMarkerArray shapes) at `scale` px/m; walls are
  * at least `minWidthPx` wide. Also the dashboard's (class-view.js), with thinner walls.
  */
 export function paintWalls(ctx, markers, toScreen, scale, minWidthPx = 2) {
@@ -410,6 +409,12 @@ export function paintWalls(ctx, markers, toScreen, scale, minWidthPx = 2) {
         ctx.lineTo(...toScreen(x2, y2));
       }
       ctx.stroke();
+    } else if (shape.kind === 'polygon') { // a box: solid, as the world file says
+      ctx.beginPath();
+      shape.corners.forEach(([x, y], i) => (i ? ctx.lineTo(...toScreen(x, y))
+        : ctx.moveTo(...toScreen(x, y))));
+      ctx.closePath();
+      ctx.fill();
     } else {
       const [sx, sy] = toScreen(shape.x, shape.y);
       ctx.beginPath();
