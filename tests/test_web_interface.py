@@ -390,6 +390,24 @@ OTHER_DRIVER_SHOWS = """() => {
 
 
 @needs_browser
+def test_a_reset_by_another_client_is_announced_and_breaks_the_trail(
+        server: ServerProcess, bridge: Bridge, browser: Any) -> None:
+    with driving_page(browser, bridge, page_url(server),
+                      viewport={"width": 1280, "height": 860}) as (page, log):
+        deadline = time.monotonic() + 10.0
+        while x_of(latest_odom(bridge)) < 0.7 and time.monotonic() < deadline:
+            bridge.send(op="publish", topic="/cmd_vel", msg={  # another client drives away
+                "linear": {"x": 0.5, "y": 0.0, "z": 0.0},
+                "angular": {"x": 0.0, "y": 0.0, "z": 0.0}})
+            time.sleep(0.1)
+        assert page.is_hidden("#reset-notice")
+        reset_robot(bridge)  # and resets it: this page did not ask
+        page.wait_for_selector("#reset-notice:not([hidden])", timeout=5000)
+        assert page.evaluate("window.websim.state.trail.points.at(-1).gap")  # no line back
+        assert log.page_errors == []
+
+
+@needs_browser
 def test_another_client_driving_shows_a_badge_the_pages_own_driving_does_not(
         server: ServerProcess, bridge: Bridge, browser: Any) -> None:
     cmd_vel = ROBOT["topics"]["cmd_vel"]

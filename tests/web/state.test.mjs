@@ -4,8 +4,8 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  createState, displayPose, HISTORY_S, notePose, onGroundTruth, onOdometry, onWorld, POSE_HISTORY_S,
-  poseAt, rateHz, TRUTH_STALE_MS,
+  createState, displayPose, HISTORY_S, noteOwnReset, notePose, onGroundTruth, onOdometry, onWorld,
+  POSE_HISTORY_S, poseAt, rateHz, RESET_SHOW_MS, resetByOther, TRUTH_STALE_MS,
 } from '../../web-interface/js/state.js';
 
 function odometry(x, y, stampS, frame = 'odom') {
@@ -85,4 +85,18 @@ test('a scan is placed at the pose of its stamp, interpolated, the heading the s
   assert.deepEqual(state.poses.map.map((p) => p.stampS), [1]);
   notePose(state, 'map', { x: 5, y: 5, theta: 0, stampS: null });  // no stamp: not kept
   assert.equal(state.poses.map.length, 1);
+});
+
+test('a jump of the shown pose breaks the trail and is announced unless the page asked', () => {
+  const state = createState();
+  onGroundTruth(state, odometry(1.5, 0, 10, 'map'), 1000);
+  onGroundTruth(state, odometry(1.6, 0, 10.05, 'map'), 1050);
+  assert.equal(resetByOther(state, 1060), false); // moving, no jump
+  onGroundTruth(state, odometry(0, 0, 10.1, 'map'), 1100); // back at the start: a reset
+  assert.equal(state.trail.points.at(-1).gap, true); // no line joins it to the old pose
+  assert.equal(resetByOther(state, 1200), true);
+  assert.equal(resetByOther(state, 1100 + RESET_SHOW_MS + 1), false); // said for a while
+  noteOwnReset(state, 5000); // this page asked: its own reset is not another's
+  onGroundTruth(state, odometry(1.2, 0, 12, 'map'), 5200);
+  assert.equal(resetByOther(state, 5300), false);
 });

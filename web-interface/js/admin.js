@@ -15,7 +15,7 @@ import {
   withoutToken,
 } from './connection.js';
 import { bindConnectionBar, runFrameLoop } from './connection-bar.js';
-import { createState } from './state.js';
+import { createState, noteOwnReset } from './state.js';
 import { LivePlots } from './plots.js';
 import { Readouts } from './readouts.js';
 import { ParametersPanel } from './params-panel.js';
@@ -98,6 +98,7 @@ async function main() {
   const bar = bindConnectionBar(connection, {
     form: $('#connect-form'), input: $('#ws-url'), status: $('#conn-status'),
     message: $('#view-message'), otherDriver: $('#other-driver'),
+    resetNotice: $('#reset-notice'),
   }, robot);
   const state = createState();
   subscribeRobot(connection, state, robot);
@@ -111,6 +112,8 @@ async function main() {
     reload: $('#params-reload'), reset: $('#reset-sim'),
   });
   bindTokenCard(connection, storage, params);
+  // Our own reset is announced by the panel; the jump it makes is not another client's.
+  $('#reset-sim').addEventListener('click', () => noteOwnReset(state, performance.now()));
   closeWithPage(connection);
   keepBridgeOnNavigation();
   runFrameLoop((now) => view.draw(now), (now) => plots.update(now),

@@ -4,19 +4,21 @@
 
 import { resolveWsUrl } from './connection.js';
 import { othersDriving } from './drivers.js';
+import { resetByOther } from './state.js';
 
 const WAITING_MS = 2000; // connected but no odometry for this long: say so
 
 /**
  * @param {Connection} connection
  * @param {{form: HTMLFormElement, input: HTMLInputElement, status: HTMLElement,
- *          message: HTMLElement, otherDriver?: HTMLElement}} elements otherDriver: shown while
- *   another client's velocity commands arrive
+ *          message: HTMLElement, otherDriver?: HTMLElement, resetNotice?: HTMLElement}}
+ *   elements otherDriver: shown while another client's velocity commands arrive; resetNotice:
+ *   shown for a while after a reset this page did not ask for
  * @param {object} robot the robot description (robot.js): the odometry topic it waits for
  * @returns {{update: (nowMs: number, state: object) => void}}
  */
 export function bindConnectionBar(connection, {
-  form, input, status, message, otherDriver = null,
+  form, input, status, message, otherDriver = null, resetNotice = null,
 }, robot) {
   const odomTopic = robot.topics.odom.name;
   let connectedAtMs = null;
@@ -52,6 +54,8 @@ export function bindConnectionBar(connection, {
       }
       const foreign = connection.isConnected && othersDriving(state.drivers, nowMs);
       if (otherDriver && otherDriver.hidden === foreign) otherDriver.hidden = !foreign;
+      const reset = connection.isConnected && resetByOther(state, nowMs);
+      if (resetNotice && resetNotice.hidden === reset) resetNotice.hidden = !reset;
     },
   };
 }

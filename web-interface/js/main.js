@@ -21,6 +21,7 @@ async function main() {
   const bar = bindConnectionBar(connection, {
     form: $('#connect-form'), input: $('#ws-url'), status: $('#conn-status'),
     message: $('#view-message'), otherDriver: $('#other-driver'),
+    resetNotice: $('#reset-notice'),
   }, robot);
   subscribeRobot(connection, state, robot);
   const view = createView(state, robot);

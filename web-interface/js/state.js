@@ -21,6 +21,10 @@ export const TRAIL_BREAK_M = 0.5;
 export const TRUTH_STALE_MS = 1000;
 /** Message rates are counted over this window (ms). */
 export const RATE_WINDOW_MS = 2000;
+/** A reset another client made is announced this long (ms). */
+export const RESET_SHOW_MS = 4000;
+/** A jump this soon (ms) after the page's own reset request is that reset, not another's. */
+export const OWN_RESET_MS = 3000;
 /** Seconds of stamped poses kept per frame, to draw a scan where it was taken. */
 export const POSE_HISTORY_S = 2;
 
@@ -46,6 +50,8 @@ export function createState() {
     arrivals: new Map(), // stream (robot.json's topic key: odom, scan...) -> arrival times (ms)
     poses: { map: [], odom: [] }, // per frame, the recent stamped poses, oldest first
     latency: createLatency(), // the page's commands until odometry shows them (latency.js)
+    jumpAtMs: -Infinity, // when the shown pose last jumped (a reset): the trail breaks there
+    ownResetAtMs: -Infinity, // when this page last asked for a reset
   };
 }
 
@@ -153,6 +159,19 @@ export function onCommand(state, linear, angular) {
   state.command = { linear, angular };
 }
 
+/** The page asked for a reset at nowMs: the jump that follows is its own. */
+export function noteOwnReset(state, nowMs) {
+  state.ownResetAtMs = nowMs;
+}
+
+/** Whether to say another client reset the robot: a jump lately, not after our own request. */
+export function resetByOther(state, nowMs) {
+  const jumpAtMs = state.jumpAtMs;
+  if (nowMs - jumpAtMs > RESET_SHOW_MS) return false;
+  const sinceOwn = jumpAtMs - state.ownResetAtMs;
+  return !(sinceOwn >= 0 && sinceOwn <= OWN_RESET_MS);
+}
+
 /** Forgets the trail (a new connection, or the user's "clear"). */
 export function clearTrail(state) {
   state.trail = { frame: null, points: [] };
@@ -168,7 +187,9 @@ function extendTrail(state, pose, frame, nowMs) {
   const last = points[points.length - 1];
   const step = last ? Math.hypot(pose.x - last.x, pose.y - last.y) : Infinity;
   if (!last || step >= TRAIL_STEP_M) {
-    points.push({ x: pose.x, y: pose.y, tMs: nowMs, gap: !last || step > TRAIL_BREAK_M });
+    const jumped = Boolean(last) && step > TRAIL_BREAK_M;
+    if (jumped) state.jumpAtMs = nowMs;
+    points.push({ x: pose.x, y: pose.y, tMs: nowMs, gap: !last || jumped });
   }
   while (points.length && points[0].tMs < nowMs - TRAIL_S * 1000) points.shift();
 }
