@@ -4,8 +4,8 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  createState, displayPose, HISTORY_S, noteOwnReset, notePose, onGroundTruth, onOdometry, onWorld,
-  POSE_HISTORY_S, poseAt, rateHz, RESET_SHOW_MS, resetByOther, TRUTH_STALE_MS,
+  createState, displayPose, historyCsv, HISTORY_S, noteOwnReset, notePose, onGroundTruth, onOdometry, onWorld,
+  POSE_HISTORY_S, poseAt, rateHz, RESET_SHOW_MS, resetByOther, TRUTH_STALE_MS, unwrapDeg,
 } from '../../web-interface/js/state.js';
 
 function odometry(x, y, stampS, frame = 'odom') {
@@ -99,4 +99,27 @@ test('a jump of the shown pose breaks the trail and is announced unless the page
   noteOwnReset(state, 5000); // this page asked: its own reset is not another's
   onGroundTruth(state, odometry(1.2, 0, 12, 'map'), 5200);
   assert.equal(resetByOther(state, 5300), false);
+});
+
+test('the heading is unwrapped across ±180°, the setpoint on the heading\'s turn', () => {
+  assert.equal(unwrapDeg(170, undefined), 170);
+  assert.equal(unwrapDeg(-170, 170), 190); // crossed +180 going up: goes on
+  assert.equal(unwrapDeg(170, 190), 170);
+  assert.equal(unwrapDeg(-90, 700), 630); // two turns on
+  const state = createState();
+  const turning = [170, 179, -179, -170].map((deg, i) => ({
+    header: { stamp: { sec: 10 + i, nanosec: 0 }, frame_id: 'odom' },
+    pose: { pose: { position: { x: 0, y: 0, z: 0 }, orientation: {
+      x: 0, y: 0, z: Math.sin((deg * Math.PI) / 360), w: Math.cos((deg * Math.PI) / 360) } } },
+    twist: { twist: { linear: { x: 0 }, angular: { z: 0.5 } } },
+  }));
+  state.setpointDeg = -175; // the PID's, wrapped
+  turning.forEach((msg, i) => onOdometry(state, msg, 1000 + i));
+  const headings = state.history.headingDeg.map((d) => Math.round(d * 1e6) / 1e6);
+  assert.deepEqual(headings, [170, 179, 181, 190]);
+  assert.deepEqual(state.history.setpointDeg.map((d) => Math.round(d)), [185, 185, 185, 185]);
+  const csv = historyCsv(state.history).trim().split('\n');
+  assert.equal(csv[0], 'stamp_s,v_cmd_mps,v_mps,omega_cmd_rps,omega_rps,heading_deg,setpoint_deg');
+  assert.equal(csv.length, 5);
+  assert.equal(csv[1].split(',')[0], '10');
 });

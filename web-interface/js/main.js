@@ -42,7 +42,7 @@ async function main() {
     (now) => headingPlot.update(now),
     (now) => readouts.update(now), (now) => bar.update(now, state));
   connection.connect();
-  window.websim = { connection, robot, state, view, teleop, pid }; // for the browser's console
+  window.websim = { connection, robot, state, view, teleop, pid, plots, headingPlot }; // console
 }
 
 main().catch((error) => showFatal(`The page could not start: ${error.message}`));

@@ -194,6 +194,27 @@ function extendTrail(state, pose, frame, nowMs) {
   while (points.length && points[0].tMs < nowMs - TRAIL_S * 1000) points.shift();
 }
 
+/**
+ * `deg` moved by whole turns to lie within half a turn of `nearDeg` (undefined: as it is):
+ * the heading plot continues across ±180° instead of jumping.
+ */
+export function unwrapDeg(deg, nearDeg) {
+  if (nearDeg === undefined || nearDeg === null) return deg;
+  return nearDeg + (((deg - nearDeg) % 360) + 540) % 360 - 180;
+}
+
+/** The plotted history as CSV: one row per /odom, stamps in s, speeds in SI, angles in °. */
+export function historyCsv(history) {
+  const columns = [['stamp_s', 't'], ['v_cmd_mps', 'vCmd'], ['v_mps', 'vMeas'],
+    ['omega_cmd_rps', 'wCmd'], ['omega_rps', 'wMeas'], ['heading_deg', 'headingDeg'],
+    ['setpoint_deg', 'setpointDeg']];
+  const rows = [columns.map(([name]) => name).join(',')];
+  for (let i = 0; i < history.t.length; i += 1) {
+    rows.push(columns.map(([, key]) => (history[key][i] ?? '')).join(','));
+  }
+  return `${rows.join('\n')}\n`;
+}
+
 function recordHistory(state, pose) {
   const h = state.history;
   const t = pose.stampS;
@@ -206,8 +227,10 @@ function recordHistory(state, pose) {
   h.vMeas.push(pose.v);
   h.wCmd.push(state.command.angular);
   h.wMeas.push(pose.omega);
-  h.headingDeg.push((pose.theta * 180) / Math.PI);
-  h.setpointDeg.push(state.setpointDeg);
+  const headingDeg = unwrapDeg((pose.theta * 180) / Math.PI, h.headingDeg.at(-1));
+  h.headingDeg.push(headingDeg);
+  h.setpointDeg.push(state.setpointDeg === null ? null
+    : unwrapDeg(state.setpointDeg, headingDeg)); // the setpoint's turn nearest the heading
   let drop = 0;
   while (drop < h.t.length && h.t[drop] < t - HISTORY_S) drop += 1;
   if (drop) for (const key of Object.keys(h)) h[key].splice(0, drop);
