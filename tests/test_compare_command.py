@@ -176,3 +176,32 @@ def test_progress_bar_appears_only_after_a_second() -> None:
     lines = stream.getvalue().splitlines()
     assert lines[-1].startswith("simulating [") and " 100 % " in lines[-1]
     assert 1 <= len(lines) <= 4, "not a terminal: a line per quarter at most"
+
+
+@pytest.mark.parametrize(("fmt", "magic"), [("svg", b"<?xml"), ("pdf", b"%PDF")])
+def test_figure_formats_for_slides(tmp_path: Path, fmt: str, magic: bytes) -> None:
+    pytest.importorskip("matplotlib")
+    assert run_compare(tmp_path, "--format", fmt) == 0
+    figure = tmp_path / "out" / f"comparison.{fmt}"
+    assert figure.read_bytes().startswith(magic)
+    assert not (tmp_path / "out" / "comparison.png").exists()
+
+
+def test_a_pid_figure_has_a_title_and_the_heading_with_its_setpoint(tmp_path: Path) -> None:
+    matplotlib = pytest.importorskip("matplotlib")
+    with matplotlib.rc_context({"svg.fonttype": "none"}):  # text as text, to read it back
+        assert run_compare(tmp_path, "--format", "svg", "--controller", "pid",
+                           "--setpoint-deg", "90", "--kp", "2.5") == 0
+    svg = (tmp_path / "out" / "comparison.svg").read_text(encoding="utf-8")
+    assert "step.yaml in " in svg and "seed 0" in svg and "mass " in svg  # what made it
+    assert "heading PID to 90° (Kp 2.5" in svg
+    assert "Heading: the PID" in svg and "setpoint 90°" in svg
+    assert "θ (°)" in svg
+
+
+def test_a_run_without_controller_has_no_heading_panel(tmp_path: Path) -> None:
+    matplotlib = pytest.importorskip("matplotlib")
+    with matplotlib.rc_context({"svg.fonttype": "none"}):
+        assert run_compare(tmp_path, "--format", "svg") == 0
+    svg = (tmp_path / "out" / "comparison.svg").read_text(encoding="utf-8")
+    assert "Velocity response" in svg and "Heading: the PID" not in svg

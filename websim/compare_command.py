@@ -2,7 +2,8 @@
 
 Writes ``trajectory.csv`` (one row per tick and mode, columns ``TRAJECTORY_COLUMNS``),
 ``summary.json`` (``physics.compare.compare``'s summary) and, if matplotlib is installed,
-``comparison.png`` (paths over the world's walls, v(t) and omega(t) commanded and measured).
+``comparison.png`` (``--format svg|pdf`` for slides; paths over the world's walls, v(t) and
+omega(t) commanded and measured, the heading and its setpoint for a PID run).
 """
 
 from __future__ import annotations
@@ -41,6 +42,12 @@ PROGRESS_DELAY_S = 1.0
 PROGRESS_REDRAW_S = 0.1
 """Shortest wall time between two redraws of the progress bar on a terminal."""
 
+FIGURE_FORMATS = ("png", "svg", "pdf")
+"""What ``--format`` may ask for."""
+
+FIGURE_DPI = 200
+"""Resolution of the figure (a slide's, projected)."""
+
 MODE_STYLES = {"kinematic": ("tab:blue", "-"), "dynamic": ("tab:orange", "-")}
 """Line colour and style of each mode in the figure."""
 
@@ -55,6 +62,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="NAME=VALUE",
                         help="override a robot parameter, e.g. --set mass_kg=2.4 (repeatable)")
+    parser.add_argument("--format", dest="figure_format", choices=FIGURE_FORMATS,
+                        default="png", help="the figure's format (default png; svg and pdf "
+                                            f"for slides), at {FIGURE_DPI} dpi")
     control = parser.add_argument_group("heading controller (replaces angular_rps)")
     control.add_argument("--controller", choices=["pid"], default=None,
                          help="drive angular.z with the course's 10 Hz heading PID")
@@ -136,10 +146,13 @@ def run(args: argparse.Namespace) -> int:
 
     written = [write_trajectory(result, out / "trajectory.csv"),
                write_summary(result, out / "summary.json")]
+    figure_path = out / f"comparison.{args.figure_format}"
+    title = figure_title(args, robot, world, controller)
     try:
-        written.append(write_figure(result, world, segments, out / "comparison.png"))
+        written.append(write_figure(result, world, segments, figure_path, title=title,
+                                    controller=controller))
     except ImportError:
-        print(f"websim: comparison.png skipped, matplotlib is not installed: {PLOTS_HINT}",
+        print(f"websim: {figure_path.name} skipped, matplotlib is not installed: {PLOTS_HINT}",
               file=sys.stderr)
     difference = result.summary["difference"]
     print(f"wrote {', '.join(str(path) for path in written)}")
@@ -147,6 +160,20 @@ def run(args: argparse.Namespace) -> int:
           f"max path deviation {difference['max_path_deviation_m']:.4f} m "
           f"at t = {difference['max_path_deviation_at_s']:.2f} s")
     return 0
+
+
+def figure_title(args: argparse.Namespace, robot: RobotParams, world: World,
+                 controller: HeadingController | None) -> str:
+    """What made the figure: the command file, world, seed, payload and controller."""
+    parts = [f"{Path(args.commands).name} in {world.name}", f"seed {args.seed}",
+             f"mass {robot.mass_kg:g} kg", f"inertia {robot.inertia_kg_m2:g} kg m²"]
+    if args.overrides:
+        parts.append("set " + ", ".join(args.overrides))
+    if controller is not None:
+        parts.append(f"heading PID to {math.degrees(controller.setpoint_rad):g}° (Kp "
+                     f"{controller.gains.kp:g}, Ki {controller.gains.ki:g}, Kd "
+                     f"{controller.gains.kd:g}, {controller.feedback} feedback)")
+    return "; ".join(parts)
 
 
 def total_ticks(segments: Sequence[Segment]) -> int:
@@ -229,8 +256,12 @@ def _opened(path: Path) -> IO[str]:
 
 
 def write_figure(result: Comparison, world: World, segments: Sequence[Segment],
-                 path: Path) -> Path:
-    """Draw the paths over the walls and the velocity responses to ``path`` (PNG).
+                 path: Path, title: str = "",
+                 controller: HeadingController | None = None) -> Path:
+    """Draw the paths over the walls and the responses to ``path`` (its suffix: the format).
+
+    The velocity panels, and for a heading PID run the heading with its setpoint; segments
+    numbered on the time axis; ``title`` on top. 200 dpi.
 
     Raises:
         ImportError: matplotlib is not installed.
@@ -239,9 +270,12 @@ def write_figure(result: Comparison, world: World, segments: Sequence[Segment],
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle
 
-    figure = Figure(figsize=(12, 6.5), dpi=100, layout="constrained")
+    panels = 3 if controller is not None else 2
+    figure = Figure(figsize=(12, 3.25 * panels), dpi=FIGURE_DPI, layout="constrained")
     FigureCanvasAgg(figure)
-    grid = figure.add_gridspec(2, 2, width_ratios=(1.0, 1.25))
+    if title:
+        figure.suptitle(title, fontsize=10)
+    grid = figure.add_gridspec(panels, 2, width_ratios=(1.0, 1.25))
     paths = figure.add_subplot(grid[:, 0])
     linear = figure.add_subplot(grid[0, 1])
     angular = figure.add_subplot(grid[1, 1], sharex=linear)
@@ -296,9 +330,44 @@ def write_figure(result: Comparison, world: World, segments: Sequence[Segment],
         axes.grid(alpha=0.3)
         axes.legend(loc="best", fontsize=9)
     linear.set_title("Velocity response: commanded vs each mode (true velocity)")
-    angular.set_xlabel("t (s)")
-    figure.savefig(path, format="png")
+    last = angular
+    if controller is not None:
+        last = figure.add_subplot(grid[2, 1], sharex=linear)
+        _heading_panel(last, result, world, segments, controller)
+    last.set_xlabel("t (s)")
+    figure.savefig(path, format=path.suffix.lstrip(".") or "png", dpi=FIGURE_DPI)
     return path
+
+
+def _heading_panel(axes: Any, result: Comparison, world: World, segments: Sequence[Segment],
+                   controller: HeadingController) -> None:
+    """Each mode's heading the PID measured (odometry or true, from spawn) and its setpoint."""
+    setpoint_deg = math.degrees(controller.setpoint_rad)
+    for mode in MODES_COMPARED:
+        rows = result.mode_rows(mode)
+        colour, style = MODE_STYLES[mode]
+        headings = [r.odom_theta if controller.feedback == "odometry"
+                    else r.theta - world.start.theta for r in rows]
+        axes.plot([r.t_s for r in rows], _unwrapped_deg(headings), color=colour,
+                  linestyle=style, linewidth=1.8, label=f"{mode} ({controller.feedback})")
+    axes.axhline(setpoint_deg, color="tab:red", linestyle="--", linewidth=1.2,
+                 label=f"setpoint {setpoint_deg:g}°")
+    _mark_segments(axes, segments)
+    axes.set_ylabel("θ (°)")
+    axes.set_title("Heading: the PID's measurement and its setpoint", fontsize=10)
+    axes.grid(alpha=0.3)
+    axes.legend(loc="best", fontsize=9)
+
+
+def _unwrapped_deg(angles_rad: Sequence[float]) -> list[float]:
+    """Angles in degrees without ±180° jumps (each within half a turn of the one before)."""
+    out: list[float] = []
+    for angle in angles_rad:
+        deg = math.degrees(angle)
+        if out:
+            deg = out[-1] + (deg - out[-1] + 180.0) % 360.0 - 180.0
+        out.append(deg)
+    return out
 
 
 def _zoom(axes: Any, xs: Sequence[float], ys: Sequence[float]) -> None:
@@ -312,11 +381,13 @@ def _zoom(axes: Any, xs: Sequence[float], ys: Sequence[float]) -> None:
 
 
 def _mark_segments(axes: Any, segments: Sequence[Segment]) -> None:
-    """Thin vertical lines at segment starts; payload changes labelled."""
+    """Thin vertical lines at segment starts, each segment numbered; payload changes labelled."""
     t = 0.0
-    for segment in segments:
+    for index, segment in enumerate(segments, start=1):
         if t > 0.0:
             axes.axvline(t, color="0.8", linewidth=0.8, zorder=0)
+        axes.annotate(f"{index}", (t, 0.0), xycoords=("data", "axes fraction"),
+                      xytext=(3, 3), textcoords="offset points", color="0.45", fontsize=7)
         if segment.mass_kg is not None or segment.inertia_kg_m2 is not None:
             axes.axvline(t, color="tab:red", linewidth=1.0, zorder=0)
             axes.annotate("payload", (t, 1.0), xycoords=("data", "axes fraction"),
