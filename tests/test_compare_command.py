@@ -15,7 +15,7 @@ from physics import RobotParams, compare_modes, load_commands, load_world
 from physics.compare import TRAJECTORY_COLUMNS, HeadingController
 from physics.pid import PidGains
 from websim.cli import main
-from websim.compare_command import Progress
+from websim.compare_command import progress_bar
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "commands"
 STEP = EXAMPLES / "step.yaml"
@@ -161,21 +161,34 @@ def test_odometry_fed_pid_hides_wheel_slip_that_true_heading_shows(tmp_path: Pat
     assert fed["ground_truth"]["true_heading"]["overshoot_pct"] > 5.0
 
 
-def test_progress_bar_appears_only_after_a_second() -> None:
-    now = [0.0]
-    stream = io.StringIO()
-    progress = Progress(100, stream, clock=lambda: now[0])
-    for _ in range(50):
-        progress.tick()
-        now[0] += 0.01
-    assert stream.getvalue() == "", "half a second in: nothing"
-    for _ in range(50):
-        progress.tick()
-        now[0] += 0.05
-    progress.close()
-    lines = stream.getvalue().splitlines()
-    assert lines[-1].startswith("simulating [") and " 100 % " in lines[-1]
-    assert 1 <= len(lines) <= 4, "not a terminal: a line per quarter at most"
+class Terminal(io.StringIO):
+    """A stream that says it is a terminal."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+def test_the_progress_bar_shows_on_a_terminal_only() -> None:
+    terminal = Terminal()
+    with progress_bar(100, terminal, delay_s=0.0) as progress:
+        for _ in range(100):
+            progress.update()
+        progress.refresh()
+        shown = terminal.getvalue()
+    assert "simulating" in shown and "100/100" in shown
+    log = io.StringIO()  # a log file, CI: no bar at all
+    with progress_bar(100, log, delay_s=0.0) as progress:
+        for _ in range(100):
+            progress.update()
+    assert log.getvalue() == ""
+
+
+def test_a_short_run_shows_no_bar() -> None:
+    terminal = Terminal()
+    with progress_bar(100, terminal) as progress:  # the default delay: one second
+        for _ in range(100):
+            progress.update()
+    assert "simulating" not in terminal.getvalue()
 
 
 @pytest.mark.parametrize(("fmt", "magic"), [("svg", b"<?xml"), ("pdf", b"%PDF")])

@@ -14,10 +14,11 @@ import dataclasses
 import json
 import math
 import sys
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import IO, Any
+
+from tqdm import tqdm
 
 from physics import TICK_PERIOD_S, ConfigError, RobotParams, World, load_params, load_world
 from physics.compare import (
@@ -139,10 +140,13 @@ def run(args: argparse.Namespace) -> int:
     except OSError as error:
         raise ConfigError(f"{out}: cannot create output directory: {error.strerror}") from None
 
-    progress = Progress(len(MODES_COMPARED) * total_ticks(segments), sys.stderr)
-    result = compare(world, segments, robot, seed=args.seed, lidar=platform.lidar,
-                     noise=platform.noise, controller=controller, on_tick=progress.tick)
-    progress.close()
+    with progress_bar(len(MODES_COMPARED) * total_ticks(segments), sys.stderr) as progress:
+
+        def tick() -> None:
+            progress.update()
+
+        result = compare(world, segments, robot, seed=args.seed, lidar=platform.lidar,
+                         noise=platform.noise, controller=controller, on_tick=tick)
 
     written = [write_trajectory(result, out / "trajectory.csv"),
                write_summary(result, out / "summary.json")]
@@ -181,54 +185,14 @@ def total_ticks(segments: Sequence[Segment]) -> int:
     return sum(max(1, round(segment.duration_s / TICK_PERIOD_S)) for segment in segments)
 
 
-class Progress:
-    """A progress bar on ``stream`` that appears only once a run has taken ``delay_s``.
+def progress_bar(total: int, stream: IO[str], delay_s: float = PROGRESS_DELAY_S) -> tqdm[Any]:
+    """The run's progress bar (tqdm) on ``stream``, cleared at the end.
 
-    On a terminal it redraws one line in place; elsewhere (a log file, CI) it prints a line
-    at every quarter, so logs stay readable. Twenty lines of code instead of a tqdm dependency.
+    It appears only once the run has taken ``delay_s``, and only on a terminal: a log file or
+    CI gets none.
     """
-
-    def __init__(self, total: int, stream: IO[str], *, delay_s: float = PROGRESS_DELAY_S,
-                 clock: Callable[[], float] = time.monotonic) -> None:
-        self.total = max(1, total)
-        self.stream = stream
-        self.delay_s = delay_s
-        self.clock = clock
-        self.done = 0
-        self.started = clock()
-        self.last_drawn: float | None = None
-        self.last_quarter = 0
-        self.terminal = stream.isatty()
-
-    def tick(self) -> None:
-        """Count one tick; draw if the run is long enough and a redraw is due."""
-        self.done += 1
-        now = self.clock()
-        if now - self.started < self.delay_s:
-            return
-        if self.terminal:
-            if self.last_drawn is None or now - self.last_drawn >= PROGRESS_REDRAW_S \
-                    or self.done == self.total:
-                self._draw("\r", "")
-                self.last_drawn = now
-        elif 4 * self.done // self.total > self.last_quarter:
-            self.last_quarter = 4 * self.done // self.total
-            self._draw("", "\n")
-            self.last_drawn = now
-
-    def close(self) -> None:
-        """End the bar's line, if one was drawn."""
-        if self.last_drawn is not None and self.terminal:
-            self.stream.write("\n")
-            self.stream.flush()
-
-    def _draw(self, start: str, end: str) -> None:
-        width = 30
-        filled = width * self.done // self.total
-        self.stream.write(f"{start}simulating [{'#' * filled}{'.' * (width - filled)}] "
-                          f"{100 * self.done // self.total:3d} % "
-                          f"({self.clock() - self.started:.1f} s){end}")
-        self.stream.flush()
+    return tqdm(total=total, file=stream, delay=delay_s, mininterval=PROGRESS_REDRAW_S,
+                desc="simulating", unit=" ticks", leave=False, disable=None)
 
 
 def write_trajectory(result: Comparison, path: Path) -> Path:
