@@ -7,10 +7,12 @@ over real sockets with a client that closes a loop among many that only watch.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import gc
 import json
 import time
 import weakref
+from collections.abc import AsyncIterator
 
 import pytest
 from websockets.asyncio.client import connect
@@ -128,15 +130,25 @@ def test_a_watcher_is_not_served_first() -> None:
     assert sent == []  # nobody drives: every frame waits for the tick's one write
 
 
+@contextlib.asynccontextmanager
+async def embedded_server() -> AsyncIterator[tuple[SimServer, str]]:
+    """A real server in this event loop, ticking, on a free port: (server, its URL)."""
+    server = SimServer(VirtualRobot(Simulation(load_world("empty"), seed=0)), "t")
+    listening = await start_websocket(server, "127.0.0.1", 0)
+    port = listening.sockets[0].getsockname()[1]
+    ticks = asyncio.create_task(server.run_ticks())
+    try:
+        yield server, f"ws://127.0.0.1:{port}/"
+    finally:
+        ticks.cancel()
+        listening.close()
+        await listening.wait_closed()
+
+
 def test_many_watchers_and_one_driver_over_real_sockets() -> None:
     """Every watcher gets every /odom in order, in whole frames; the driver's commands show."""
     async def scenario() -> None:
-        server = SimServer(VirtualRobot(Simulation(load_world("empty"), seed=0)), "t")
-        listening = await start_websocket(server, "127.0.0.1", 0)
-        port = listening.sockets[0].getsockname()[1]
-        ticks = asyncio.create_task(server.run_ticks())
-        url = f"ws://127.0.0.1:{port}/"
-        try:
+        async with embedded_server() as (_, url):
             watchers = [await connect(url, compression=None) for _ in range(30)]
             driver = await connect(url, compression=None)
             for connection in [*watchers, driver]:
@@ -160,10 +172,6 @@ def test_many_watchers_and_one_driver_over_real_sockets() -> None:
                 assert stamps == sorted(stamps) and len(set(stamps)) == 5
             for connection in [*watchers, driver]:
                 await connection.close()
-        finally:
-            ticks.cancel()
-            listening.close()
-            await listening.wait_closed()
 
     asyncio.run(scenario())
 
@@ -222,12 +230,8 @@ def test_a_throttle_counts_from_when_ticks_were_due_so_late_ticks_lose_nothing()
 def test_a_closed_connection_is_freed_at_once_not_at_the_next_full_collection() -> None:
     """A client's buffers (up to a megabyte a frame) must not wait for the cyclic GC."""
     async def scenario() -> None:
-        server = SimServer(VirtualRobot(Simulation(load_world("empty"), seed=0)), "t")
-        listening = await start_websocket(server, "127.0.0.1", 0)
-        port = listening.sockets[0].getsockname()[1]
-        ticks = asyncio.create_task(server.run_ticks())
-        try:
-            async with connect(f"ws://127.0.0.1:{port}/", compression=None) as client:
+        async with embedded_server() as (server, url):
+            async with connect(url, compression=None) as client:
                 await client.send(json.dumps({"op": "subscribe", "topic": "/odom"}))
                 await asyncio.wait_for(client.recv(), 5.0)
                 session, = server.bridge.sessions
@@ -239,10 +243,6 @@ def test_a_closed_connection_is_freed_at_once_not_at_the_next_full_collection() 
             for _ in range(5):  # let the connection's tasks finish
                 await asyncio.sleep(0.05)
             assert gone() is None, [type(r).__name__ for r in gc.get_referrers(gone())]
-        finally:
-            ticks.cancel()
-            listening.close()
-            await listening.wait_closed()
 
     gc.disable()
     try:
