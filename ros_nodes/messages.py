@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any, ClassVar
 
 from physics import ConfigError, LaserScan, Odometry, World
 from physics.validation import as_finite_float
@@ -21,8 +21,45 @@ from physics.validation import as_finite_float
 Message = dict[str, Any]
 
 
-class Float32Sequence(list[float]):
-    """A ``float32[]`` field (e.g. ``LaserScan.ranges``): a list that encoders may pack."""
+class TypedSequence(list[Any]):
+    """A numeric array field of one ROS element type: a list that encoders may pack.
+
+    JSON writes it as a list; CBOR as an RFC 8746 typed array of ``element``
+    (``ros_nodes.rosbridge.encoding``), as rosbridge does. Subclasses fix ``element``.
+    """
+
+    element: ClassVar[str] = ""
+
+
+class Float32Sequence(TypedSequence):
+    """A ``float32[]`` field (e.g. ``LaserScan.ranges``)."""
+
+    element = "float32"
+
+
+NUMERIC_ELEMENTS = ("int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64",
+                    "float32", "float64")
+"""ROS element types whose arrays are ``TypedSequence`` s (``uint8[]`` only when not base64)."""
+
+_SEQUENCE_CLASSES: dict[str, type[TypedSequence]] = {"float32": Float32Sequence}
+for _element in NUMERIC_ELEMENTS:
+    if _element not in _SEQUENCE_CLASSES:
+        _SEQUENCE_CLASSES[_element] = type(f"{_element.capitalize()}Sequence",
+                                           (TypedSequence,), {"element": _element})
+
+
+def typed_sequence(element: str, values: Iterable[Any]) -> list[Any]:
+    """``values`` as the ``TypedSequence`` of ``element``; a plain list for other elements."""
+    cls = _SEQUENCE_CLASSES.get(element)
+    return cls(values) if cls is not None else list(values)
+
+
+class Base64Bytes(str):
+    """A ``uint8[]``/``byte[]`` field as base64 text (rosbridge's JSON form).
+
+    JSON writes the text; CBOR writes the bytes it stands for (a byte string), as rosbridge's
+    CBOR encoding does.
+    """
 
 ODOM_FRAME = "odom"
 BASE_FRAME = "base_link"
