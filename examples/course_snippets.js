@@ -8,8 +8,12 @@
 // `websim serve` (ws://localhost:9090), the Docker stack (ws://HOST:9090) or the real robot's
 // rosbridge: only the URL changes (section 2.5.6.3).
 //
-// roslib is the web interface's copy (cd web-interface && npm ci); with roslib installed
-// anywhere else, `require('roslib')` is all that is needed.
+// This file needs roslib 1.4.1, the course text's version: `npm install roslib` now installs
+// roslib 2.x, an ES module only, where `require('roslib')` fails and ROSLIB.Message is gone;
+// for 2.x run course_snippets.mjs instead (examples/README.md). Here roslib is the web
+// interface's copy of 1.4.1 (cd web-interface && npm ci), so the file runs from the checkout;
+// in your own script, after `npm install roslib@1.4.1` next to it, the line below is just
+// `const ROSLIB = require('roslib');`.
 'use strict';
 
 const path = require('path');

@@ -14,6 +14,14 @@ if command -v node >/dev/null && [ "$lock" -nt web-interface/node_modules/.packa
     (cd web-interface && npm ci --no-audit --no-fund --loglevel=error >/dev/null)
 fi
 
+# roslib 2.x (ES modules only) for examples/course_snippets.mjs (tests/test_examples.py), pinned
+# by tests/node/roslib2/package-lock.json and installed the same way. Without it, or without
+# node, the roslib 2.x example tests are skipped.
+lock=tests/node/roslib2/package-lock.json
+if command -v node >/dev/null && [ "$lock" -nt tests/node/roslib2/node_modules/.package-lock.json ]; then
+    (cd tests/node/roslib2 && npm ci --no-audit --no-fund --loglevel=error >/dev/null)
+fi
+
 # --- deployment test tools (tests/test_deploy.py) -------------------------------------------
 # The real nginx and docker-compose (no Docker engine needed; `docker-compose config` only),
 # installed from apt when missing and running as root. Without them, their tests are skipped.

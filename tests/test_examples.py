@@ -35,6 +35,27 @@ the local rosbridge as the served copy would."""
 NODE = shutil.which("node")
 RUN_TIMEOUT_S = 30.0
 
+ROSLIB2_MODULES = ROOT / "tests" / "node" / "roslib2" / "node_modules"
+"""roslib 2.x (ES modules only), installed by scripts/test.sh from tests/node/roslib2's lock."""
+ROSLIB2_MIN_NODE = 20
+"""roslib 2.x's package.json asks for Node >= 20 (its ES modules use newer syntax)."""
+
+
+def _node_major() -> int:
+    if NODE is None:
+        return 0
+    version = subprocess.run([NODE, "--version"], capture_output=True, text=True,
+                             check=False).stdout
+    match = re.match(r"v(\d+)", version)
+    return int(match.group(1)) if match else 0
+
+
+ROSLIB2_SKIP = ("node not installed" if NODE is None else
+                f"roslib 2.x needs Node >= {ROSLIB2_MIN_NODE}"
+                if _node_major() < ROSLIB2_MIN_NODE else
+                None if (ROSLIB2_MODULES / "roslib" / "package.json").exists() else
+                "roslib 2.x missing: run npm ci in tests/node/roslib2/ (scripts/test.sh does)")
+
 ARC_RADIUS_M = 0.3 / 0.5
 """The scripts drive at 0.3 m/s and 0.5 rad/s: a circle of radius v/ω through the spawn."""
 ARC_TOLERANCE_M = 0.02
@@ -119,6 +140,75 @@ def test_scripts_fail_with_the_reason_when_nothing_listens() -> None:
                                 timeout=RUN_TIMEOUT_S, check=False)
         assert result.returncode != 0, command
         assert result.stderr, command
+
+
+def student_folder(tmp_path: Path, script: str, node_modules: Path) -> Path:
+    """A student's folder: ``examples/<script>`` copied in, with ``node_modules`` beside it
+    (as ``npm install roslib`` leaves it; a link to ours). Node resolves ``import 'roslib'``
+    from the script's folder upwards, NODE_PATH aside; returns the copied script."""
+    copied = tmp_path / script
+    shutil.copyfile(EXAMPLES / script, copied)
+    (tmp_path / "node_modules").symlink_to(node_modules, target_is_directory=True)
+    return copied
+
+
+def run_roslib2_snippets(tmp_path: Path, url: str) -> subprocess.CompletedProcess[str]:
+    """``node course_snippets.mjs URL`` in a student's folder with roslib 2.x installed."""
+    assert NODE is not None
+    script = student_folder(tmp_path, "course_snippets.mjs", ROSLIB2_MODULES)
+    return subprocess.run([NODE, script.name, url], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=RUN_TIMEOUT_S, check=False)
+
+
+@pytest.mark.skipif(ROSLIB2_SKIP is not None, reason=ROSLIB2_SKIP or "")
+@pytest.mark.skipif(not ROSLIB.exists(), reason="roslib missing: run npm ci in web-interface/")
+def test_each_roslib_loads_only_with_its_own_line(tmp_path: Path) -> None:
+    """examples/README.md's one-line difference, in a folder with each version installed:
+    1.4.1 is ``require``d and has ROSLIB.Message; 2.x (pinned by the test package) has no
+    CommonJS entry, so ``require`` fails (why course_snippets.mjs exists), is ``import``ed, and
+    has no ROSLIB.Message (publish plain objects)."""
+    assert NODE is not None
+    show = "console.log(ROSLIB.REVISION, typeof ROSLIB.Ros, typeof ROSLIB.Message)"
+
+    def node(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
+        assert NODE is not None
+        return subprocess.run([NODE, *args], cwd=folder, capture_output=True, text=True,
+                              timeout=RUN_TIMEOUT_S, check=False)
+
+    classic, modular = tmp_path / "roslib1", tmp_path / "roslib2"
+    for folder, modules in ((classic, ROOT / "web-interface" / "node_modules"),
+                            (modular, ROSLIB2_MODULES)):
+        folder.mkdir()
+        (folder / "node_modules").symlink_to(modules, target_is_directory=True)
+
+    required = node(classic, "-e", f"const ROSLIB = require('roslib'); {show}")
+    assert required.stdout.split() == ["1.4.1", "function", "function"], required.stderr
+    imported = node(modular, "--input-type=module", "-e",
+                    f"import * as ROSLIB from 'roslib'; {show}")
+    assert imported.returncode == 0, imported.stderr
+    revision, ros, message = imported.stdout.split()
+    assert (revision.split(".")[0], ros, message) == ("2", "function", "undefined")
+    not_required = node(modular, "-e", "require('roslib')")
+    assert not_required.returncode != 0
+    assert "ERR_PACKAGE_PATH_NOT_EXPORTED" in not_required.stderr or (
+        "ERR_REQUIRE" in not_required.stderr), not_required.stderr
+
+
+@pytest.mark.skipif(ROSLIB2_SKIP is not None, reason=ROSLIB2_SKIP or "")
+def test_roslib2_course_snippets_drive_the_robot(server: ServerProcess, tmp_path: Path) -> None:
+    result = run_roslib2_snippets(tmp_path, server.ws_url)
+    assert result.returncode == 0, result.stderr
+    check_drive_output(result.stdout, server)
+
+
+@pytest.mark.skipif(ROSLIB2_SKIP is not None, reason=ROSLIB2_SKIP or "")
+def test_roslib2_snippets_fail_with_the_reason_when_nothing_listens(tmp_path: Path) -> None:
+    from server_process import free_port
+
+    result = run_roslib2_snippets(tmp_path, f"ws://127.0.0.1:{free_port()}")
+    assert result.returncode == 1
+    assert result.stderr.startswith("Error: "), result.stderr
+    assert "ECONNREFUSED" in result.stderr, result.stderr
 
 
 BROWSER_SKIP = skip_reason([ROSLIB])
