@@ -189,11 +189,29 @@ def test_queue_length_keeps_the_newest_messages_for_a_slow_client(rig: Rig) -> N
     assert client.outbox.dropped == 7
 
 
-def test_default_queue_keeps_only_the_newest(rig: Rig) -> None:
+def test_default_queue_length_0_sends_every_message_while_the_client_keeps_up(
+        rig: Rig) -> None:
+    """rosbridge with no throttle: queue_length 0 drops nothing (a burst arrives whole)."""
     client = rig.client()
     rig.send(client, {"op": "subscribe", "topic": "/odom"})
     rig.tick(5)
-    assert len(rig.drain(client)) == 1
+    stamps = [f["msg"]["header"]["stamp"]["nanosec"] for f in rig.drain(client)]
+    assert len(stamps) == 5 and stamps == sorted(stamps)
+    assert client.outbox.dropped == 0
+
+
+def test_default_queue_length_0_keeps_only_the_newest_while_the_client_is_behind(
+        rig: Rig) -> None:
+    client = rig.client()
+    rig.send(client, {"op": "subscribe", "topic": "/odom"})
+    rig.tick(3)
+    client.outbox.behind = True  # what the connection sets when the socket backs up
+    rig.tick(2)
+    frames = rig.drain(client)
+    assert len(frames) == 1 and client.outbox.dropped == 4
+    client.outbox.behind = False
+    rig.tick(4)
+    assert len(rig.drain(client)) == 4
 
 
 def test_cbor_subscription_gets_binary_frames_with_typed_float32_ranges(rig: Rig) -> None:
@@ -499,6 +517,7 @@ def test_huge_array_is_relayed_within_the_bounded_queue(rig: Rig) -> None:
     sender, reader = rig.client(), rig.client()
     rig.send(sender, {"op": "advertise", "topic": "/big", "type": "std_msgs/Float32MultiArray"})
     rig.send(reader, {"op": "subscribe", "topic": "/big"})
+    reader.outbox.behind = True  # its socket takes nothing: the connection says so
     for _ in range(20):
         rig.send(sender, {"op": "publish", "topic": "/big", "msg": {"data": [1.5] * 20_000}})
     assert len(reader.outbox) == 1, "a reader that does not read keeps only the newest"

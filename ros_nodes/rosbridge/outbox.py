@@ -3,9 +3,13 @@
 There is no backpressure in a broadcast: a client that reads slowly must not stall the tick or
 the other clients, nor grow without bound. Each subscribed topic keeps at most its
 ``queue_length`` newest frames (older ones are dropped, as rosbridge's ``queue_length``
-promises); replies (service responses, statuses) are never dropped. Everything waiting is
-counted in bytes: past ``max_bytes``, or past ``max_replies`` replies, the outbox is marked
-``overflowed`` with the reason, and the server closes the client (it is not reading).
+promises). ``queue_length`` 0 (both libraries' default) means what it means in rosbridge
+with no throttle: every message is sent, a burst of ten published at once included; only
+while the client is ``behind`` (its socket does not take what is written) does such a topic
+keep just its newest frame. Replies (service responses, statuses) are never dropped.
+Everything waiting is counted in bytes: past ``max_bytes``, or past ``max_replies`` replies,
+the outbox is marked ``overflowed`` with the reason, and the server closes the client (it is
+not reading).
 """
 
 from __future__ import annotations
@@ -17,9 +21,22 @@ from collections.abc import Callable
 Frame = str | bytes
 """A WebSocket message: text (JSON) or binary (CBOR)."""
 
+Frames = Frame | tuple[Frame, ...]
+"""One message's frames: one, or a fragmented message's (``fragments``), which are queued,
+dropped and counted together and sent one after the other."""
 
-def _sequence_of(entry: tuple[int, Frame]) -> int:
+
+def _sequence_of(entry: tuple[int, Frames]) -> int:
     return entry[0]
+
+
+def _size(frames: Frames) -> int:
+    return sum(map(len, frames)) if isinstance(frames, tuple) else len(frames)
+
+
+def _flat(entries: list[Frames]) -> list[Frame]:
+    return [frame for entry in entries
+            for frame in (entry if isinstance(entry, tuple) else (entry,))]
 
 
 class Outbox:
@@ -35,8 +52,8 @@ class Outbox:
     def __init__(self, max_bytes: int = 4 << 20, max_replies: int = 1000,
                  wake: Callable[[], None] | None = None,
                  send: Callable[[], None] | None = None) -> None:
-        self._replies: deque[Frame] = deque()
-        self._topics: dict[str, deque[tuple[int, Frame]]] = {}
+        self._replies: deque[Frames] = deque()
+        self._topics: dict[str, deque[tuple[int, Frames]]] = {}
         self._sequence = itertools.count()
         self._max_bytes = max_bytes
         self._max_replies = max_replies
@@ -48,33 +65,41 @@ class Outbox:
         """Topic frames dropped because a newer one replaced them."""
         self.overflowed: str | None = None
         """Why the client must be closed (it let too much pile up), or None."""
+        self.behind = False
+        """Whether frames wait for the client's socket (the connection sets it): then a
+        ``queue_length`` 0 topic keeps only its newest frame."""
 
     def __len__(self) -> int:
         return len(self._replies) + sum(len(queue) for queue in self._topics.values())
 
-    def put_reply(self, frame: Frame) -> None:
+    def put_reply(self, frame: Frames) -> None:
         """Queue a reply; past the reply or byte budget, mark the outbox overflowed."""
         if len(self._replies) >= self._max_replies:
             self._overflow(f"{self._max_replies} replies unread")
             return
         self._replies.append(frame)
-        self._grow(len(frame))
+        self._grow(_size(frame))
 
-    def put_topic(self, topic: str, frame: Frame, queue_length: int) -> None:
-        """Queue a topic frame, keeping the newest ``max(1, queue_length)`` for ``topic``."""
+    def put_topic(self, topic: str, frame: Frames, queue_length: int) -> None:
+        """Queue a topic frame, keeping the newest ``queue_length`` for ``topic``.
+
+        ``queue_length`` 0: every frame while the client keeps up, the newest one while it is
+        ``behind``.
+        """
         queue = self._topics.get(topic)
-        limit = max(1, queue_length)
+        limit = queue_length if queue_length > 0 else (1 if self.behind else None)
         if queue is None or queue.maxlen != limit:
             old = list(queue or ())
-            kept = old[-limit:]
-            self.queued_bytes -= sum(len(f) for _, f in old[:len(old) - len(kept)])
+            kept = old if limit is None else old[-limit:]
+            self.dropped += len(old) - len(kept)
+            self.queued_bytes -= sum(_size(f) for _, f in old[:len(old) - len(kept)])
             queue = deque(kept, maxlen=limit)
             self._topics[topic] = queue
         if len(queue) == limit:
             self.dropped += 1
-            self.queued_bytes -= len(queue[0][1])
+            self.queued_bytes -= _size(queue[0][1])
         queue.append((next(self._sequence), frame))
-        self._grow(len(frame))
+        self._grow(_size(frame))
 
     def detach(self) -> None:
         """Forget the connection's callbacks once it is gone.
@@ -95,20 +120,28 @@ class Outbox:
         """Forget frames of a topic the client unsubscribed from."""
         queue = self._topics.pop(topic, None)
         if queue:
-            self.queued_bytes -= sum(len(frame) for _, frame in queue)
+            self.queued_bytes -= sum(_size(frame) for _, frame in queue)
 
     def pop(self) -> Frame | None:
-        """The next frame to send: replies first, then topic frames oldest first."""
+        """The next frame to send: replies first, then topic frames oldest first.
+
+        A fragmented message's frames come one per call, its rest left at the head.
+        """
         if self._replies:
-            frame = self._replies.popleft()
+            entry = self._replies.popleft()
+            if isinstance(entry, tuple) and len(entry) > 1:
+                self._replies.appendleft(entry[1:])
         else:
-            oldest: deque[tuple[int, Frame]] | None = None
+            oldest: deque[tuple[int, Frames]] | None = None
             for queue in self._topics.values():
                 if queue and (oldest is None or queue[0][0] < oldest[0][0]):
                     oldest = queue
             if oldest is None:
                 return None
-            frame = oldest.popleft()[1]
+            sequence, entry = oldest.popleft()
+            if isinstance(entry, tuple) and len(entry) > 1:
+                oldest.appendleft((sequence, entry[1:]))
+        frame = entry[0] if isinstance(entry, tuple) else entry
         self.queued_bytes -= len(frame)
         return frame
 
@@ -123,12 +156,12 @@ class Outbox:
                 frames.append(frame)
                 max_bytes -= len(frame)
             return frames
-        frames = list(self._replies)
+        frames = _flat(list(self._replies))
         self._replies.clear()
         topic_frames = [entry for queue in self._topics.values() for entry in queue]
         if topic_frames:
             topic_frames.sort(key=_sequence_of)
-            frames.extend(frame for _, frame in topic_frames)
+            frames.extend(_flat([frame for _, frame in topic_frames]))
             for queue in self._topics.values():
                 queue.clear()
         self.queued_bytes = 0

@@ -376,6 +376,7 @@ class ClientConnection:
                 self._handed_bytes += len(data)
                 transport.write(data)
         if len(outbox) > 0 or outbox.overflowed is not None:
+            outbox.behind = True
             self._backed_up.set()
 
     async def _write(self) -> None:
@@ -398,6 +399,7 @@ class ClientConnection:
                 if outbox.overflowed is not None:
                     self._close(POLICY_VIOLATION, outbox.overflowed)
                     return
+                outbox.behind = False
                 self._backed_up.clear()  # caught up: back to flushing after each tick
         except ConnectionClosed:
             pass
