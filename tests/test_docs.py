@@ -2,14 +2,18 @@
 
 The README's parameter table is ``parameters.markdown_table()``; its limits table states
 ``ClientLimits``' and the schema's numbers; ``web-interface/robot.json`` (what nginx serves in
-the Docker stack) is ``websim robot-json`` for the shipped parameters.
+the Docker stack) is ``websim robot-json`` for the shipped parameters. Every relative link in
+the docs reaches a file and, where it names one, a heading.
 """
 
 from __future__ import annotations
 
 import io
+import re
 from contextlib import redirect_stdout
 from pathlib import Path
+
+import pytest
 
 from ros_nodes.parameters import markdown_table
 from ros_nodes.robot_description import robot_json
@@ -63,3 +67,34 @@ def test_committed_robot_json_is_the_shipped_robot() -> None:
     with redirect_stdout(printed):
         assert main(["robot-json"]) == 0
     assert printed.getvalue() == committed
+
+
+MARKDOWN_LINK = re.compile(r"\]\(([^)\s]+)\)")
+DOCS = ("README.md", "docs/course.md", "docs/assignments.md", "examples/README.md")
+
+
+def github_anchor(heading: str) -> str:
+    """The anchor GitHub gives a heading: lower case, punctuation dropped, spaces to '-'."""
+    text = re.sub(r"[^\w\- ]", "", heading.strip().lower())
+    return text.replace(" ", "-")
+
+
+def anchors_of(path: Path) -> set[str]:
+    return {github_anchor(line.lstrip("#")) for line in path.read_text().splitlines()
+            if line.startswith("#")}
+
+
+@pytest.mark.parametrize("doc", DOCS)
+def test_relative_links_in_the_docs_reach_a_file_and_heading(doc: str) -> None:
+    source = ROOT / doc
+    broken = []
+    for target in MARKDOWN_LINK.findall(source.read_text()):
+        if "://" in target or target.startswith("mailto:"):
+            continue
+        file_part, _, anchor = target.partition("#")
+        linked = (source.parent / file_part).resolve() if file_part else source
+        if not linked.exists():
+            broken.append(f"{target}: no such file")
+        elif anchor and linked.suffix == ".md" and anchor not in anchors_of(linked):
+            broken.append(f"{target}: no heading with that anchor")
+    assert not broken, f"{doc}: {broken}"
