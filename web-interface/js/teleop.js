@@ -193,16 +193,23 @@ export function bindButtons(teleop, root) {
   }
 }
 
+/** The joystick's diameter (CSS px) where its zone has room for it. */
+const JOYSTICK_SIZE_PX = 150;
+/** The joystick keeps at least this much (CSS px) between its rim and its zone's edges. */
+const JOYSTICK_MARGIN_PX = 10;
+
 /**
  * A nipplejs joystick in `zone`: up drives forward, sideways turns; its deflection (0 at the
- * centre, 1 at the rim) scales the speed.
+ * centre, 1 at the rim) scales the speed. It is as large as fits inside the zone's narrower
+ * side (style.css shapes the zone: a wide strip upright, a column beside the view sideways).
  */
 export function bindJoystick(teleop, zone, nipplejs) {
+  const room = Math.min(zone.clientWidth, zone.clientHeight) - 2 * JOYSTICK_MARGIN_PX;
   const manager = nipplejs.create({
     zone,
     mode: 'static',
     position: { left: '50%', top: '50%' },
-    size: Math.min(150, zone.clientWidth - 20 || 150),
+    size: room > 0 ? Math.min(JOYSTICK_SIZE_PX, room) : JOYSTICK_SIZE_PX,
     color: { front: '#2563eb', back: 'rgba(37, 99, 235, 0.15)' },
     restOpacity: 0.8,
   });
