@@ -4,13 +4,20 @@ A message a client publishes is relayed to every subscriber, so it is relayed as
 means, not as what was sent: ``canonical`` keeps exactly the fields of the type (missing ones
 get their defaults, as rosbridge fills them), refuses fields the type lacks, values of the
 wrong type and integers out of their type's range, and accepts ROS 1's ``{secs, nsecs}``
-stamp spelling (what roslibpy's ``Header`` writes). A megabyte of extra fields on a Twist is
-an error, not a megabyte sent to every subscriber.
+stamp spelling (what roslibpy's ``Header`` writes, with its ``seq``, which is dropped). A
+megabyte of extra fields on a Twist is an error, not a megabyte sent to every subscriber.
+Numeric arrays come out as ``messages.typed_sequence`` s and byte arrays (``uint8[]``,
+``byte[]``) as ``messages.Base64Bytes``, so the encoders write them as rosbridge does (base64
+text in JSON; typed arrays and byte strings in CBOR), whichever spelling the client sent.
 
 The definitions are those of ROS 2 Humble's standard message packages, from the rosbags
 typestore (a maintained, ROS-free copy of them): std_msgs, geometry_msgs, sensor_msgs,
-nav_msgs, tf2_msgs, visualization_msgs, builtin_interfaces, rcl_interfaces and more. Types it
-does not know are the caller's concern (``known`` says which are known).
+nav_msgs, tf2_msgs, visualization_msgs, builtin_interfaces, rcl_interfaces and more, plus
+the packages it lacks that courses use, shipped as their ROS 2 ``.msg`` (or ``.idl``) text
+in ``ros_nodes/interfaces/<package>/msg/`` (example_interfaces). A type defined nowhere is
+refused (``check_type``) with rosbridge's reason; with ``websim serve --ros`` the types of
+every installed ROS 2 package count too (``graph=True``: converted through their rclpy
+classes, ``ros_nodes.ros_interop``).
 """
 
 from __future__ import annotations
@@ -20,12 +27,21 @@ import binascii
 import functools
 import math
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
+import numpy as np
 from rosbags.interfaces import Nodetype
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
 from physics.validation import ConfigError
+from ros_nodes.messages import NUMERIC_ELEMENTS, Base64Bytes, normalize_type, typed_sequence
+
+INTERFACES_DIR = Path(__file__).with_name("interfaces")
+"""Definitions the typestore lacks: ``<package>/msg/<Type>.msg`` (``.idl`` where the rosbags
+``.msg`` reader falls short: ``wstring``), the ROS 2 interface text."""
+
+TYPESTORE = Stores.ROS2_HUMBLE
 
 INTEGER_RANGES = {
     "bool": None, "byte": (0, 255), "char": (0, 255), "octet": (0, 255),
@@ -37,15 +53,22 @@ INTEGER_RANGES = {
 """Accepted values of each integer type of the ROS IDL."""
 
 FLOAT_TYPES = frozenset({"float32", "float64"})
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+"""Largest finite float32: a larger finite value is refused, not sent as infinity."""
+
 BYTE_SEQUENCE_TYPES = frozenset({"uint8", "byte", "char", "octet"})
-"""Element types whose sequences rosbridge writes as base64 text."""
+"""Element types whose arrays and sequences rosbridge writes as base64 text."""
 
 TIME_TYPES = frozenset({"builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"})
 ROS1_TIME_FIELDS = {"secs": "sec", "nsecs": "nanosec"}
 """ROS 1 spellings of ``builtin_interfaces`` fields that rosbridge accepts."""
+HEADER_TYPE = "std_msgs/msg/Header"
+ROS1_HEADER_FIELDS = frozenset({"seq"})
+"""Fields of ROS 1's ``Header`` that ROS 2's lacks; dropped (roslibpy's ``Header`` writes
+``seq``, null or a counter)."""
 
 FAST_SEQUENCE_MIN = 32
-"""Numeric sequences longer than this are checked as a whole (``_numbers``), not per item."""
+"""Numeric sequences longer than this are checked as a whole (``numbers``), not per item."""
 
 MAX_DEPTH = 32
 """Deepest nesting of message types followed (standard messages nest fewer than ten)."""
@@ -57,8 +80,21 @@ class MessageError(ConfigError):
 
 @functools.cache
 def _fielddefs() -> Mapping[str, Any]:
-    """The typestore's definitions (read once, never changed)."""
-    return get_typestore(Stores.ROS2_HUMBLE).fielddefs
+    """The typestore's definitions and the shipped ones (read once, never changed)."""
+    store = get_typestore(TYPESTORE)  # a new store of this process's own
+    store.register(shipped_definitions())
+    return store.fielddefs
+
+
+def shipped_definitions(folder: Path = INTERFACES_DIR) -> dict[str, Any]:
+    """The definitions of ``folder``'s ``<package>/msg/<Type>.msg`` and ``.idl`` files."""
+    types: dict[str, Any] = {}
+    for path in sorted(folder.glob("*/msg/*.msg")):
+        name = f"{path.parent.parent.name}/msg/{path.stem}"
+        types.update(get_types_from_msg(path.read_text(encoding="utf-8"), name))
+    for path in sorted(folder.glob("*/msg/*.idl")):
+        types.update(get_types_from_idl(path.read_text(encoding="utf-8")))
+    return types
 
 
 def load() -> None:
@@ -71,22 +107,98 @@ def known(type_name: str) -> bool:
     return type_name in _fielddefs()
 
 
+@functools.cache
+def packages() -> tuple[str, ...]:
+    """The packages whose message types are defined here, sorted."""
+    return tuple(sorted({name.split("/")[0] for name in _fielddefs()}))
+
+
+COURSE_PACKAGES = ("std_msgs", "geometry_msgs", "sensor_msgs", "nav_msgs", "example_interfaces")
+"""The packages the refusal of an unknown type names first."""
+
+
+def check_type(type_name: str, *, graph: bool = False) -> str:
+    """``type_name`` as ``pkg/msg/Type`` if it is a message type websim can check.
+
+    Args:
+        type_name: ``pkg/msg/Type`` or ``pkg/Type``.
+        graph: a ROS 2 graph is attached (``--ros``): an importable rclpy message class counts.
+
+    Raises:
+        MessageError: not a type name, or a type defined nowhere; the reason is rosbridge's
+            (``Unable to import wangle_msgs.msg from package wangle_msgs. Caused by: ...``).
+    """
+    try:
+        normalized = normalize_type(type_name)
+    except ValueError as error:
+        raise MessageError(str(error)) from None
+    if known(normalized):
+        return normalized
+    if graph:
+        from ros_nodes.ros_interop import MessageConversionError, message_class
+
+        try:
+            message_class(normalized)
+        except MessageConversionError as error:
+            raise MessageError(str(error)) from None
+        return normalized
+    raise MessageError(unknown_type_reason(normalized))
+
+
+def unknown_type_reason(type_name: str) -> str:
+    """Why ``pkg/kind/Type`` is refused: rosbridge's reason (its import error), then a hint."""
+    package, kind, name = type_name.split("/")
+    if package in packages():
+        reason = (f"Unable to import {kind} class {name} from package {package}. Caused by "
+                  f"module '{package}.{kind}' has no attribute '{name}'")
+    else:
+        reason = (f"Unable to import {package}.{kind} from package {package}. Caused by: "
+                  f"No module named '{package}'")
+    others = len(packages()) - len(COURSE_PACKAGES)
+    return (f"{reason} (websim knows {', '.join(COURSE_PACKAGES)} and {others} more "
+            "packages; with --ros, every installed one)")
+
+
 def fields(type_name: str) -> list[str]:
     """The field names of a known message type, in order; KeyError if unknown."""
     return [name for name, _ in _fielddefs()[type_name][1]]
 
 
-def canonical(type_name: str, msg: Any) -> dict[str, Any]:
+def canonical(type_name: str, msg: Any, *, graph: bool = False) -> dict[str, Any]:
     """``msg`` as a ``type_name`` message: the type's fields only, defaults filled in.
 
+    Args:
+        type_name: ``pkg/msg/Type``.
+        msg: the message as a client sent it.
+        graph: a ROS 2 graph is attached (``--ros``): a type defined only by an installed
+            rclpy package is converted through its class (``ros_interop``).
+
     Raises:
-        MessageError: ``type_name`` is not known, or ``msg`` does not fit it; the reason names
-            the field (``linear.x: expected a number, got str``).
-        KeyError: never; unknown types raise MessageError.
+        MessageError: ``type_name`` is not known (``check_type``), or ``msg`` does not fit
+            it; the reason names the field (``linear.x: expected a number, got str``).
     """
-    if not known(type_name):
-        raise MessageError(f"unknown message type {type_name}")
-    return _message(type_name, msg, type_name, 0)
+    if known(type_name):
+        return _message(type_name, msg, type_name, 0)
+    check_type(type_name, graph=graph)
+    from ros_nodes.ros_interop import MessageConversionError, message_class, to_dict, to_message
+
+    try:
+        return to_dict(to_message(message_class(type_name), msg))
+    except MessageConversionError as error:
+        raise MessageError(str(error)) from None
+
+
+def from_ros1(type_name: str, msg: Mapping[Any, Any]) -> Mapping[Any, Any]:
+    """``msg`` with the ROS 1 spellings rosbridge accepts put in ROS 2's (see the module text).
+
+    ``{secs, nsecs}`` of a ``builtin_interfaces`` Time or Duration become ``{sec, nanosec}``;
+    the ``seq`` of a ``std_msgs/Header`` is dropped. Other messages are returned as they are.
+    """
+    if type_name in TIME_TYPES and not msg.keys().isdisjoint(ROS1_TIME_FIELDS):
+        return {ROS1_TIME_FIELDS.get(key, key): value for key, value in msg.items()}
+    if type_name == HEADER_TYPE and not msg.keys().isdisjoint(ROS1_HEADER_FIELDS):
+        return {key: value for key, value in msg.items() if key not in ROS1_HEADER_FIELDS}
+    return msg
 
 
 def default(type_name: str) -> dict[str, Any]:
@@ -95,18 +207,18 @@ def default(type_name: str) -> dict[str, Any]:
 
 
 def _message(type_name: str, msg: Any, where: str, depth: int) -> dict[str, Any]:
+    prefix = "" if where == type_name else f"{where}: "
     if depth > MAX_DEPTH:
         raise MessageError(f"{where}: nested too deeply")
     if not isinstance(msg, Mapping):
-        raise MessageError(f"{where}: expected an object ({type_name}), got "
+        raise MessageError(f"{prefix}expected an object ({type_name}), got "
                            f"{type(msg).__name__}")
     definition = _fielddefs()[type_name][1]
     names = {name for name, _ in definition}
-    if type_name in TIME_TYPES:
-        msg = {ROS1_TIME_FIELDS.get(key, key): value for key, value in msg.items()}
+    msg = from_ros1(type_name, msg)
     for key in msg:
         if key not in names:
-            raise MessageError(f"{where}: {type_name} has no field '{str(key)[:60]}' "
+            raise MessageError(f"{prefix}{type_name} has no field '{str(key)[:60]}' "
                                f"(fields: {', '.join(name for name, _ in definition)})")
     out: dict[str, Any] = {}
     for name, (kind, detail) in definition:
@@ -120,44 +232,82 @@ def _message(type_name: str, msg: Any, where: str, depth: int) -> dict[str, Any]
 
 def _value(kind: Nodetype, detail: Any, value: Any, where: str, depth: int) -> Any:
     if kind == Nodetype.BASE:
-        return _base(detail[0], value, where)
+        return check_value(detail[0], value, where, detail[1])
     if kind == Nodetype.NAME:
         return _message(detail, value, where, depth + 1)
     element, length = detail
-    if kind == Nodetype.SEQUENCE and element[0] == Nodetype.BASE \
-            and element[1][0] in BYTE_SEQUENCE_TYPES and isinstance(value, str):
-        try:
-            data = base64.b64decode(value, validate=True)
-        except (binascii.Error, ValueError):
-            raise MessageError(f"{where}: expected base64 text or a list of bytes") from None
-        if length and len(data) > length:
-            raise MessageError(f"{where}: at most {length} bytes, got {len(data)}")
-        return value
+    sub_kind, sub_detail = element
+    is_bytes = sub_kind == Nodetype.BASE and sub_detail[0] in BYTE_SEQUENCE_TYPES
+    if is_bytes and isinstance(value, str):
+        data = decode_base64(value, where)
+        check_length(kind == Nodetype.ARRAY, length, len(data), where, "bytes")
+        return value if isinstance(value, Base64Bytes) else Base64Bytes(value)
     if not isinstance(value, list):
         raise MessageError(f"{where}: expected a list, got {type(value).__name__}")
-    if kind == Nodetype.ARRAY and len(value) != length:
-        raise MessageError(f"{where}: expected exactly {length} elements, got {len(value)}")
-    if kind == Nodetype.SEQUENCE and length and len(value) > length:
-        raise MessageError(f"{where}: at most {length} elements, got {len(value)}")
-    sub_kind, sub_detail = element
-    if sub_kind == Nodetype.BASE and len(value) > FAST_SEQUENCE_MIN:
-        fast = _numbers(sub_detail[0], value)
-        if fast is not None:
-            return fast
+    check_length(kind == Nodetype.ARRAY, length, len(value), where)
+    if sub_kind == Nodetype.BASE:
+        base_type = sub_detail[0]
+        checked = numbers(base_type, value) if len(value) > FAST_SEQUENCE_MIN else None
+        if checked is None:
+            checked = [check_value(base_type, item, f"{where}[{index}]", sub_detail[1])
+                       for index, item in enumerate(value)]
+        if is_bytes:
+            return Base64Bytes(base64.b64encode(bytes(checked)).decode("ascii"))
+        return typed_sequence(base_type, checked)
     return [_value(sub_kind, sub_detail, item, f"{where}[{index}]", depth)
             for index, item in enumerate(value)]
 
 
-def _numbers(base_type: str, value: list[Any]) -> list[Any] | None:
-    """A long numeric sequence checked at C speed; None: not plain numbers (check each)."""
+def decode_base64(text: str, where: str) -> bytes:
+    """The bytes of a ``uint8[]`` field's base64 text.
+
+    Raises:
+        MessageError: not base64 text.
+    """
+    try:
+        return base64.b64decode(text, validate=True)
+    except (binascii.Error, ValueError):
+        raise MessageError(f"{where}: expected base64 text or a list of bytes") from None
+
+
+def check_length(fixed: bool, length: int, count: int, where: str,
+                 what: str = "elements") -> None:
+    """Refuse ``count`` items where they do not fit.
+
+    Args:
+        fixed: an array of exactly ``length`` items; else a sequence of at most ``length``.
+        length: the array's length, or the sequence's bound (0: unbounded).
+        count: how many items came.
+        where: the field path, for the reason.
+        what: what the items are called in the reason.
+
+    Raises:
+        MessageError: ``count`` does not fit.
+    """
+    if fixed and count != length:
+        raise MessageError(f"{where}: expected exactly {length} {what}, got {count}")
+    if not fixed and length and count > length:
+        raise MessageError(f"{where}: at most {length} {what}, got {count}")
+
+
+def numbers(base_type: str, value: list[Any]) -> list[Any] | None:
+    """A numeric sequence checked as a whole, at C speed; None: check each item instead.
+
+    None also when an item is refused (not a plain number, out of range): the item-by-item
+    check then names it.
+    """
     kinds = set(map(type, value))
-    if base_type in FLOAT_TYPES and kinds <= {int, float}:
-        if kinds == {float}:
-            return list(value)
+    if base_type in FLOAT_TYPES and kinds <= {int, float} and value:
         try:
-            return [float(item) for item in value]
+            floats = list(value) if kinds == {float} else [float(item) for item in value]
         except OverflowError:
             return None
+        if base_type == "float32":
+            array = np.asarray(floats, dtype=np.float64)
+            beyond = np.abs(array) > FLOAT32_MAX  # infinities too, which are fine
+            if beyond.any() and np.isfinite(array[beyond]).any():
+                return None  # a finite value beyond float32: named one by one
+        return floats
     bounds = INTEGER_RANGES.get(base_type)
     if bounds is not None and kinds == {int} and bounds[0] <= min(value) \
             and max(value) <= bounds[1]:
@@ -165,7 +315,21 @@ def _numbers(base_type: str, value: list[Any]) -> list[Any] | None:
     return None
 
 
-def _base(base_type: str, value: Any, where: str) -> Any:
+def check_value(base_type: str, value: Any, where: str, max_length: int = 0) -> Any:
+    """One value of a ROS base type (``int8``, ``float32``, ``string``...), checked.
+
+    Args:
+        base_type: the ROS ``.msg`` name of the type.
+        value: as the client sent it (JSON ``null`` in a float field is NaN).
+        where: the field path, for the reason.
+        max_length: the bound of a bounded string (``string<=5``), 0 for none.
+
+    Returns:
+        The value (floats as ``float``).
+
+    Raises:
+        MessageError: the value is not of the type or out of its range, naming ``where``.
+    """
     if base_type in FLOAT_TYPES:
         if value is None:  # rosbridge writes NaN and infinities as null
             return math.nan
@@ -173,13 +337,19 @@ def _base(base_type: str, value: Any, where: str) -> Any:
             raise MessageError(f"{where}: expected a number ({base_type}), got "
                                f"{type(value).__name__}")
         try:
-            return float(value)
+            number = float(value)
         except OverflowError:
             raise MessageError(f"{where}: {len(str(abs(value)))}-digit integer is out of "
                                f"{base_type} range") from None
+        if base_type == "float32" and math.isfinite(number) and abs(number) > FLOAT32_MAX:
+            raise MessageError(f"{where}: {number:g} is out of float32 range "
+                               f"(±{FLOAT32_MAX:.7g})")
+        return number
     if base_type == "string" or base_type == "wstring":
         if not isinstance(value, str):
             raise MessageError(f"{where}: expected a string, got {type(value).__name__}")
+        if max_length and len(value) > max_length:
+            raise MessageError(f"{where}: at most {max_length} characters, got {len(value)}")
         return value
     if base_type == "bool":
         if not isinstance(value, bool):
@@ -211,6 +381,10 @@ def _default(kind: Nodetype, detail: Any, depth: int) -> Any:
             raise MessageError(f"{detail}: nested too deeply")
         return _message(detail, {}, detail, depth + 1)
     element, length = detail
-    if kind == Nodetype.ARRAY:
-        return [_default(element[0], element[1], depth) for _ in range(length)]
-    return []
+    count = length if kind == Nodetype.ARRAY else 0
+    if element[0] == Nodetype.BASE and element[1][0] in BYTE_SEQUENCE_TYPES:
+        return Base64Bytes(base64.b64encode(bytes(count)).decode("ascii"))
+    items = [_default(element[0], element[1], depth) for _ in range(count)]
+    if element[0] == Nodetype.BASE and element[1][0] in NUMERIC_ELEMENTS:
+        return typed_sequence(element[1][0], items)
+    return items

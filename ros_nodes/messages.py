@@ -4,8 +4,10 @@ Dicts are what rosbridge puts on the wire (JSON or CBOR), and what
 ``rosidl_runtime_py.set_message_fields`` fills a real rclpy message from, so the embedded bridge
 and the rclpy node share these functions. Field names and nesting are those of ROS 2
 (``builtin_interfaces/Time`` is ``{sec, nanosec}``). Non-finite floats are the encoders' concern
-(see ``ros_nodes.rosbridge.encoding``); ``uint8[]`` fields are base64 strings, as rosbridge
-sends them.
+(see ``ros_nodes.rosbridge.encoding``); ``uint8[]`` fields are base64 strings
+(``Base64Bytes``) and other numeric arrays ``TypedSequence`` s, as rosbridge sends them, so a
+message encodes alike whether it was built here, checked by ``message_types`` or read from
+rclpy.
 """
 
 from __future__ import annotations
@@ -138,8 +140,8 @@ def yaw_quaternion(theta: float) -> Message:
 
 
 def diagonal_covariance(diagonal: tuple[float, ...]) -> list[float]:
-    """A row-major 6 x 6 covariance with ``diagonal`` on its diagonal."""
-    return list(_diagonal_matrix(diagonal))
+    """A row-major 6 x 6 covariance (``float64[36]``) with ``diagonal`` on its diagonal."""
+    return typed_sequence("float64", _diagonal_matrix(diagonal))
 
 
 @functools.lru_cache(maxsize=64)
@@ -227,9 +229,9 @@ def _marker(time_s: float, marker_id: int, marker_type: int, pose: Message, scal
         "pose": pose, "scale": scale, "color": color,
         "lifetime": {"sec": 0, "nanosec": 0}, "frame_locked": False,
         "points": points, "colors": [], "texture_resource": "",
-        "texture": {"header": header(0.0, ""), "format": "", "data": ""},
+        "texture": {"header": header(0.0, ""), "format": "", "data": Base64Bytes()},
         "uv_coordinates": [], "text": "", "mesh_resource": "",
-        "mesh_file": {"filename": "", "data": ""}, "mesh_use_embedded_materials": False,
+        "mesh_file": {"filename": "", "data": Base64Bytes()}, "mesh_use_embedded_materials": False,
     }
 
 

@@ -4,9 +4,15 @@
 ``message_to_ordereddict`` in small: both walk a message class's
 ``get_fields_and_field_types()``, so one function serves every type, including types this
 project never heard of (a student's topic relayed to the browser). The dicts follow
-rosbridge's JSON conventions: ``uint8[]`` and ``byte[]`` are base64 strings, ``float32[]``
-comes out as a ``Float32Sequence`` (so CBOR packs it as a typed array) and JSON ``null`` in a
-float field is NaN (the encoders write non-finite floats as ``null``).
+rosbridge's JSON conventions: ``uint8[]`` and ``byte[]`` are base64 text
+(``messages.Base64Bytes``), other numeric arrays come out as ``messages.typed_sequence`` s (so
+CBOR packs them as typed arrays) and JSON ``null`` in a float field is NaN (the encoders write
+non-finite floats as ``null``).
+
+Every value is checked here, by ``message_types``' rules, before rclpy sees it: rclpy's own
+field checks are off by default since Jazzy (``ROS_PYTHON_CHECK_FIELDS``), and an int8 of
+32767 would otherwise go out as -1. ROS 1's ``{secs, nsecs}`` stamps are accepted
+(``message_types.from_ros1``), as rosbridge accepts them.
 
 No rclpy import: message packages are imported by name, lazily, when a type is first used.
 """
@@ -16,19 +22,31 @@ from __future__ import annotations
 import array
 import base64
 import importlib
-import math
 import re
 from collections.abc import Mapping
 from typing import Any
 
-from ros_nodes.messages import Float32Sequence, Message, normalize_type
+from ros_nodes import message_types
+from ros_nodes.messages import (
+    NUMERIC_ELEMENTS,
+    Base64Bytes,
+    Message,
+    normalize_type,
+    typed_sequence,
+)
 
-_SEQUENCE = re.compile(r"^sequence<(?P<element>[^,>]+)(?:,\s*\d+)?>$")
+_SEQUENCE = re.compile(r"^sequence<(?P<element>[^,>]+(?:<\d+>)?)(?:,\s*(?P<bound>\d+))?>$")
 _ARRAY = re.compile(r"^(?P<element>[^\[]+)\[(?P<size>\d+)\]$")
+_BOUNDED_STRING = re.compile(r"^(?P<base>w?string)<(?P<bound>\d+)>$")
+_IDENTIFIER = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+"""A package or type name: what a client's type may name, never a dotted module path."""
 _BYTE_TYPES = ("uint8", "octet")
-_FLOAT_TYPES = ("float", "double", "long double")
-_INTEGER_TYPES = ("char", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64",
-                  "uint64")
+"""Element types whose arrays are base64 text (rosbridge: ``uint8[]``; ``byte[]`` too)."""
+
+IDL_TO_MSG = {"boolean": "bool", "float": "float32", "double": "float64", "octet": "byte"}
+"""rclpy's (IDL) names of the base types whose ``.msg`` names differ; the checks use these."""
+
+_LISTS = (list, tuple, array.array)
 
 
 class MessageConversionError(ValueError):
@@ -39,23 +57,29 @@ def message_class(type_name: str) -> Any:
     """The Python class of ``pkg/msg/Type`` (or ``pkg/Type``, or ``pkg/srv/Type``).
 
     Raises:
-        MessageConversionError: not a type name, or its package is not installed (the text
-            says which wheel to install).
+        MessageConversionError: not a type name, or its package or type is not installed:
+            rosbridge's reason, and which wheel to install.
     """
     try:
         package, kind, name = normalize_type(type_name).split("/")
     except ValueError as error:
         raise MessageConversionError(str(error)) from None
+    if not (_IDENTIFIER.match(package) and _IDENTIFIER.match(name)):
+        raise MessageConversionError(f"not a ROS type name: {type_name[:80]!r} (a package and "
+                                     "a type are letters, digits and underscores)")
     try:
         module = importlib.import_module(f"{package}.{kind}")
-    except ImportError:
+    except ImportError as error:
         wheel = "ros-" + package.replace("_", "-")
         raise MessageConversionError(
-            f"{package}/{kind}/{name}: package {package} is not installed "
+            f"Unable to import {package}.{kind} from package {package}. Caused by: {error} "
             f"(pip install {wheel}, or source a ROS 2 installation that has it)") from None
     cls = getattr(module, name, None)
-    if cls is None or not hasattr(cls, "get_fields_and_field_types"):
-        raise MessageConversionError(f"{package}/{kind}/{name}: no such type in {package}")
+    if cls is None or not any(hasattr(cls, mark) for mark in (  # a msg, srv or action
+            "get_fields_and_field_types", "Request", "Goal")):
+        raise MessageConversionError(
+            f"Unable to import {kind} class {name} from package {package}. Caused by module "
+            f"'{package}.{kind}' has no attribute '{name}'")
     return cls
 
 
@@ -88,6 +112,7 @@ def _fill(msg: Any, values: Any, strict: bool, path: str) -> None:
         raise MessageConversionError(f"{path or 'message'}: expected an object, got "
                                      f"{type(values).__name__} {values!r}")
     fields = msg.get_fields_and_field_types()
+    values = message_types.from_ros1(type_name_of(type(msg)), values)
     for name, value in values.items():
         field_type = fields.get(name)
         where = f"{path}{name}"
@@ -99,6 +124,8 @@ def _fill(msg: Any, values: Any, strict: bool, path: str) -> None:
             continue
         try:
             setattr(msg, name, _field_value(field_type, value, strict, where))
+        except message_types.MessageError as error:
+            raise MessageConversionError(str(error)) from None
         except (AssertionError, TypeError, ValueError, OverflowError) as error:
             if isinstance(error, MessageConversionError):
                 raise
@@ -106,25 +133,45 @@ def _fill(msg: Any, values: Any, strict: bool, path: str) -> None:
                                          f"{': ' + str(error) if str(error) else ''}") from None
 
 
-def _element_type(field_type: str) -> tuple[str, bool]:
-    """(element type, is a sequence or array) of a field type string."""
-    for pattern in (_SEQUENCE, _ARRAY):
-        match = pattern.match(field_type)
-        if match:
-            return match.group("element").strip(), True
-    return field_type, False
+def field_shape(field_type: str) -> tuple[str, str, int]:
+    """(element type, ``scalar``/``array``/``sequence``, length or bound) of an rclpy field type.
+
+    ``int32[3]`` is an array of exactly 3, ``sequence<int32, 3>`` a sequence of at most 3,
+    ``sequence<int32>`` unbounded (0).
+    """
+    match = _SEQUENCE.match(field_type)
+    if match:
+        return match.group("element").strip(), "sequence", int(match.group("bound") or 0)
+    match = _ARRAY.match(field_type)
+    if match:
+        return match.group("element").strip(), "array", int(match.group("size"))
+    return field_type, "scalar", 0
 
 
 def _field_value(field_type: str, value: Any, strict: bool, where: str) -> Any:
-    element, many = _element_type(field_type)
-    if not many:
+    element, shape, length = field_shape(field_type)
+    if shape == "scalar":
         return _scalar(element, value, strict, where)
-    if element in _BYTE_TYPES and isinstance(value, str):
-        data = base64.b64decode(value, validate=True)
-        return [bytes([b]) for b in data] if element == "octet" else data
-    if not isinstance(value, (list, tuple, array.array)):
+    fixed = shape == "array"
+    if element in _BYTE_TYPES and isinstance(value, (str, bytes, bytearray)):
+        data = message_types.decode_base64(value, where) if isinstance(value, str) \
+            else bytes(value)
+        message_types.check_length(fixed, length, len(data), where, "bytes")
+        if element == "octet":
+            return [bytes([b]) for b in data]
+        return list(data) if fixed else data
+    if not isinstance(value, _LISTS):
         raise MessageConversionError(f"{where}: expected a list for {field_type}, got "
                                      f"{type(value).__name__} {value!r}")
+    message_types.check_length(fixed, length, len(value), where)
+    base = IDL_TO_MSG.get(element, element)
+    if base in message_types.INTEGER_RANGES or base in message_types.FLOAT_TYPES:
+        items = list(value)
+        checked = message_types.numbers(base, items) if element != "octet" else None
+        if checked is None:
+            checked = [message_types.check_value(base, item, f"{where}[{index}]")
+                       for index, item in enumerate(items)]
+        return [bytes([b]) for b in checked] if element == "octet" else checked
     return [_scalar(element, item, strict, f"{where}[{index}]")
             for index, item in enumerate(value)]
 
@@ -134,29 +181,19 @@ def _scalar(element: str, value: Any, strict: bool, where: str) -> Any:
         nested = message_class(element)()
         _fill(nested, value, strict, f"{where}.")
         return nested
-    if element in _FLOAT_TYPES:
-        if value is None:
-            return math.nan
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise MessageConversionError(f"{where}: expected a number, got {value!r}")
-        return float(value)
-    if element in _INTEGER_TYPES:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise MessageConversionError(f"{where}: expected an integer, got {value!r}")
+    if element == "octet" and isinstance(value, bytes) and len(value) == 1:
         return value
-    if element == "boolean":
-        if not isinstance(value, bool):
-            raise MessageConversionError(f"{where}: expected true or false, got {value!r}")
+    if element in ("char", "wchar"):  # an IDL character (rclpy: a one-character str)
+        if not isinstance(value, str) or len(value) != 1:
+            raise MessageConversionError(f"{where}: expected one character, got {value!r}")
         return value
-    if element == "octet":
-        if isinstance(value, int) and not isinstance(value, bool):
-            return bytes([value])
-        return value
-    if element.startswith(("string", "wstring")):
-        if not isinstance(value, str):
-            raise MessageConversionError(f"{where}: expected a string, got {value!r}")
-        return value
-    return value
+    bounded = _BOUNDED_STRING.match(element)
+    if bounded:
+        return message_types.check_value(bounded.group("base"), value, where,
+                                         int(bounded.group("bound")))
+    base = IDL_TO_MSG.get(element, element)
+    checked = message_types.check_value(base, value, where)
+    return bytes([checked]) if element == "octet" else checked
 
 
 def to_dict(msg: Any) -> Message:
@@ -168,19 +205,19 @@ def to_dict(msg: Any) -> Message:
 
 
 def _dict_value(field_type: str, value: Any) -> Any:
-    element, many = _element_type(field_type)
-    if not many:
+    element, shape, _ = field_shape(field_type)
+    if shape == "scalar":
         return _dict_scalar(element, value)
     if element in _BYTE_TYPES:
         data = b"".join(value) if element == "octet" else bytes(value)
-        return base64.b64encode(data).decode("ascii")
-    if element == "float":
-        return Float32Sequence(float(item) for item in value)
+        return Base64Bytes(base64.b64encode(data).decode("ascii"))
     if "/" in element:
         return [to_dict(item) for item in value]
-    if hasattr(value, "tolist"):  # numpy arrays (fixed-size numeric arrays) and array.array
-        return list(value.tolist())
-    return [_dict_scalar(element, item) for item in value]
+    base = IDL_TO_MSG.get(element, element)
+    items = value.tolist() if hasattr(value, "tolist") else list(value)  # numpy, array.array
+    if base in NUMERIC_ELEMENTS:
+        return typed_sequence(base, items)
+    return [_dict_scalar(element, item) for item in items]
 
 
 def _dict_scalar(element: str, value: Any) -> Any:
@@ -188,7 +225,7 @@ def _dict_scalar(element: str, value: Any) -> Any:
         return to_dict(value)
     if element == "octet" and isinstance(value, bytes):
         return value[0] if value else 0
-    if element in _FLOAT_TYPES:
+    if element in ("float", "double"):
         return float(value)
     return value
 

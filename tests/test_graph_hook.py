@@ -119,16 +119,17 @@ def test_client_publications_go_to_the_graph_cmd_vel_included() -> None:
 
 
 def test_a_missing_message_package_leaves_client_relay_working() -> None:
-    rig = Rig(RecordingGraph(missing=("my_msgs",)))
+    rig = Rig(RecordingGraph(missing=("example_interfaces",)))  # websim knows its types
     talker, listener = rig.client(), rig.client()
-    rig.send(listener, {"op": "subscribe", "topic": "/custom", "type": "my_msgs/Thing"})
-    rig.send(talker, {"op": "advertise", "topic": "/custom", "type": "my_msgs/Thing"})
-    rig.send(talker, {"op": "publish", "topic": "/custom", "msg": {"n": 1}})
+    rig.send(listener, {"op": "subscribe", "topic": "/custom",
+                        "type": "example_interfaces/Int32"})
+    rig.send(talker, {"op": "advertise", "topic": "/custom", "type": "example_interfaces/Int32"})
+    rig.send(talker, {"op": "publish", "topic": "/custom", "msg": {"data": 1}})
     statuses = [frame["msg"] for frame in rig.drain(talker) if frame["op"] == "status"]
-    assert statuses == ["package my_msgs is not installed; /custom is relayed between "
-                        "clients only"]
+    assert statuses == ["package example_interfaces is not installed; /custom is relayed "
+                        "between clients only"]
     assert [frame["msg"] for frame in rig.drain(listener) if frame["op"] == "publish"] == [
-        {"n": 1}]
+        {"data": 1}]
     assert not any(call[0] == "publish" for call in rig.graph.calls)
 
 
