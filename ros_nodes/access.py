@@ -1,7 +1,7 @@
-"""What a rosbridge client may do, in one place: the topic and service allow-list.
+"""What a rosbridge client may do, in one place: the topic, service and action allow-list.
 
-The bridge asks ``check`` before every operation that names a topic or service; the one other
-access rule, admin rights for changing parameters, is ``services.require_admin``.
+The bridge asks ``check`` before every operation that names a topic, service or action; the
+one other access rule, admin rights for changing parameters, is ``services.require_admin``.
 
 Every client (student or admin) may:
 
@@ -11,12 +11,13 @@ Every client (student or admin) may:
   bridge) nor ROS infrastructure topics (``/rosout``, ``/parameter_events``);
 * call any service (changing parameters then needs the admin token), and offer services of its
   own, but not in the simulator's namespaces (``/virtual_robot/``, ``/rosapi/``,
-  ``/websim/``).
+  ``/websim/``);
+* send goals to any action, and offer actions of its own, outside those namespaces too.
 
 Names are resolved and checked once, before this (``rosbridge.schema.resolve_name``), and one
 client may hold at most ``ClientLimits.max_subscriptions`` subscriptions, ``max_advertised``
-advertised topics and ``max_services`` services, so that one connection cannot grow the
-server's tables without bound.
+advertised topics, ``max_services`` services and ``max_actions`` actions, so that one
+connection cannot grow the server's tables without bound.
 """
 
 from __future__ import annotations
@@ -30,7 +31,8 @@ RESERVED_TOPICS = frozenset({"/rosout", "/parameter_events"})
 """ROS infrastructure topics clients may not publish."""
 
 RESERVED_SERVICE_PREFIXES = ("/virtual_robot/", "/rosapi/", "/websim/")
-"""Service namespaces of the simulator's own nodes; clients may not offer services in them."""
+"""Namespaces of the simulator's own nodes; clients may not offer services or actions in
+them."""
 
 
 class AccessError(Exception):
@@ -53,12 +55,16 @@ class Holder(Protocol):
         """Services it offers."""
 
     @property
+    def actions(self) -> Mapping[str, Any]:
+        """Actions it offers."""
+
+    @property
     def limits(self) -> ClientLimits:
         """The bounds it lives within."""
 
 
 def check(client: Holder, op: str, name: str) -> None:
-    """Raise ``AccessError`` unless ``client`` may do ``op`` on topic or service ``name``.
+    """Raise ``AccessError`` unless ``client`` may do ``op`` on the topic, service or action.
 
     ``name`` is already resolved (``schema.resolve_name``). Operations that only give
     something up (``unsubscribe``, ``unadvertise``...) are always allowed. Topics the
@@ -78,6 +84,11 @@ def check(client: Holder, op: str, name: str) -> None:
             raise AccessError(f"{name}: services under {', '.join(RESERVED_SERVICE_PREFIXES)} "
                               "belong to the simulator")
         _within(client.services, name, limits.max_services, "services")
+    elif op == "advertise_action":
+        if name.startswith(RESERVED_SERVICE_PREFIXES):
+            raise AccessError(f"{name}: actions under {', '.join(RESERVED_SERVICE_PREFIXES)} "
+                              "belong to the simulator")
+        _within(client.actions, name, limits.max_actions, "actions")
 
 
 def _within(held: Mapping[str, Any], name: str, limit: int, what: str) -> None:

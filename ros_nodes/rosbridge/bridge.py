@@ -7,6 +7,7 @@ to the capability that implements the op, as rosbridge_library splits them:
 
 * ``capabilities.topics``: advertise, publish, subscribe, throttles, queues, latching;
 * ``capabilities.services``: calls, client-provided services, timeouts;
+* ``capabilities.actions``: ROS 2 action goals, client-provided actions, cancels;
 * ``capabilities.graph``: the ROS 2 graph relay (``websim serve --ros``).
 
 The robot is attached like a client of the hub (``robot_endpoint.attach``): it subscribes
@@ -28,6 +29,7 @@ from typing import Any
 
 from physics import ConfigError
 from ros_nodes import access
+from ros_nodes.rosbridge.capabilities.actions import Actions
 from ros_nodes.rosbridge.capabilities.graph import Graph, GraphRelay
 from ros_nodes.rosbridge.capabilities.services import SERVICE_TIMEOUT_S, Services
 from ros_nodes.rosbridge.capabilities.topics import Topics
@@ -55,6 +57,7 @@ class Bridge:
         sessions: the connected clients.
         topics: the topic capability (in-process endpoints publish and subscribe here).
         services: the service capability (in-process services are added here).
+        actions: the action capability (``attach`` the ROS graph's actions with ``--ros``).
         graph: the ROS 2 graph relay (``attach`` one with ``--ros``).
         faults: unexpected exceptions caught in handlers.
     """
@@ -68,9 +71,11 @@ class Bridge:
         self.topics = Topics(self)
         self.services = Services(self, service_timeout_s)
         self.graph = GraphRelay(self)
+        self.actions = Actions(self)
         self._handlers: dict[str, Handler] = {
-            **self.topics.handlers(), **self.services.handlers(),
+            **self.topics.handlers(), **self.services.handlers(), **self.actions.handlers(),
             "set_level": self._set_level, "auth": lambda session, message: None,
+            "fragment": self._fragment,
         }
 
     # ---- what in-process endpoints use ------------------------------------------------------
@@ -98,19 +103,30 @@ class Bridge:
         self.sessions.add(session)
 
     def disconnect(self, session: Session) -> None:
-        """Forget a client: its subscriptions, advertisements, services and pending calls."""
+        """Forget a client: its subscriptions, advertisements, services, actions and calls."""
         self.sessions.discard(session)
         self.topics.disconnect(session)
         self.services.disconnect(session)
+        self.actions.disconnect(session)
 
     # ---- input ----------------------------------------------------------------------------
 
-    def handle(self, session: Session, frame: Frame) -> None:
-        """Act on one incoming WebSocket message from ``session``; never raises."""
+    def handle(self, session: Session, frame: Frame, *, reassembled: bool = False) -> None:
+        """Act on one incoming WebSocket message from ``session``; never raises.
+
+        ``reassembled``: ``frame`` is the text of a fragmented message, put back together.
+        """
         message: Any = None
         session.frame_bytes = len(frame)
+        if session.fragments:
+            for reason in session.fragments.expire():
+                session.report(reason)
         try:
             op, message = read_operation(frame, parse_json)
+            if reassembled and op == "fragment":
+                raise ProtocolError("a fragmented message cannot itself be a fragment")
+            if "fragment_size" in message:  # any op sets it (rosbridge)
+                session.fragment_size = message["fragment_size"]
             name_field = NAME_FIELDS.get(op)
             if name_field is not None:
                 name = message[name_field] = resolve_name(message[name_field])
@@ -119,7 +135,9 @@ class Bridge:
                 except access.AccessError as denied:
                     raise BridgeError(str(denied)) from None
             self._handlers[op](session, message)
-        except (ProtocolError, BridgeError, ConfigError) as error:
+        except ProtocolError as error:
+            session.refuse(str(error), message if message is not None else error.message)
+        except (BridgeError, ConfigError) as error:
             session.refuse(str(error), message)
         except Exception as error:  # a bug must not stop the bridge: record it, go on
             self.faults.record(f"handling {_op_of(message)}", error)
@@ -132,6 +150,12 @@ class Bridge:
 
     def _set_level(self, session: Session, message: dict[str, Any]) -> None:
         session.status_level = message["level"]
+
+    def _fragment(self, session: Session, message: dict[str, Any]) -> None:
+        """One ``fragment``: the message it completes is handled as any frame is."""
+        text = session.fragments.add(message)
+        if text is not None:
+            self.handle(session, text, reassembled=True)
 
 
 def _op_of(message: Any) -> str:

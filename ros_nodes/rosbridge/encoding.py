@@ -1,25 +1,48 @@
-"""Frames on the wire: JSON text (non-finite floats as null) and CBOR binary.
+"""Frames on the wire: JSON text (non-finite floats as null), CBOR binary, and rosbridge's PNG.
 
 roslibjs parses JSON with ``JSON.parse``, which throws on ``NaN`` and ``Infinity``, so every
-non-finite float goes out as ``null``, as rosbridge_server does (encoded by orjson). CBOR
-keeps floats as they are and packs ``float32[]`` fields (``Float32Sequence``) as RFC 8746
-typed arrays (tag 85, little-endian), which roslibjs decodes into a ``Float32Array``.
+non-finite float goes out as ``null``, as rosbridge_server does (encoded by orjson, which
+writes the list and str subclasses of ``ros_nodes.messages`` as plain lists and strings).
+CBOR keeps floats as they are and packs every numeric array (``TypedSequence``) as the
+RFC 8746 typed array of its element, little-endian, as rosbridge's ``cbor_conversion`` does
+and roslibjs's ``cborTypedArrayTags`` decodes (into a ``Float32Array``, ``Int32Array``...);
+a ``uint8[]`` field (``Base64Bytes``) is a CBOR byte string, as rosbridge sends ``bytes``.
+
+``compression: "png"`` (``png_frame``) is rosbridge's ``pngcompression.encode``: the JSON
+text's bytes as the pixels of an RGB image about as wide as high, padded with newlines,
+in base64. ``cbor-raw`` (``cbor_raw_frame``) sends the message's CDR bytes (``cdr``) in
+``{"op": "publish", "topic", "msg": {"secs", "nsecs", "bytes"}}``.
 """
 
 from __future__ import annotations
 
+import base64
+import io
 import json
 import math
+import re
+from collections.abc import Mapping
 from typing import Any
 
 import cbor2
 import numpy as np
 import orjson
 
-from ros_nodes.messages import Float32Sequence
+from ros_nodes.messages import Base64Bytes, TypedSequence
 
-CBOR_TAG_FLOAT32_LE = 85
-"""RFC 8746 tag of a little-endian float32 typed array."""
+CBOR_TYPED_ARRAYS: Mapping[str, tuple[int, str]] = {
+    "uint8": (64, "u1"), "uint16": (69, "<u2"), "uint32": (70, "<u4"), "uint64": (71, "<u8"),
+    "int8": (72, "i1"), "int16": (77, "<i2"), "int32": (78, "<i4"), "int64": (79, "<i8"),
+    "float32": (85, "<f4"), "float64": (86, "<f8"),
+}
+"""ROS element type -> (RFC 8746 tag of its little-endian typed array, numpy dtype): the
+tags of rosbridge's ``TAGGED_ARRAY_FORMATS``, with 64 (uint8) for a ``uint8[]`` that is not
+base64; roslibjs decodes every one of them."""
+
+PNG_PADDING = b"\n"
+"""What fills the last pixels of a PNG-packed message (JSON whitespace), as in rosbridge."""
+
+_NON_ASCII = re.compile(r"[^\x00-\x7f]")
 
 
 def _null_non_finite(value: Any) -> Any:
@@ -47,9 +70,16 @@ def to_json(message: Any) -> str:
 
 
 def _pack_typed_arrays(value: Any) -> Any:
-    if isinstance(value, Float32Sequence):
-        packed = np.asarray(value, dtype="<f4").tobytes()
-        return cbor2.CBORTag(CBOR_TAG_FLOAT32_LE, packed)
+    if isinstance(value, TypedSequence):
+        tag, dtype = CBOR_TYPED_ARRAYS[value.element]
+        try:
+            packed = np.asarray(value, dtype=dtype).tobytes()
+        except (OverflowError, TypeError) as error:
+            raise ValueError(f"a {value.element}[] holds a value that is not one: "
+                             f"{error}") from None
+        return cbor2.CBORTag(tag, packed)
+    if isinstance(value, Base64Bytes):
+        return base64.b64decode(value)
     if isinstance(value, dict):
         return {key: _pack_typed_arrays(item) for key, item in value.items()}
     if isinstance(value, list):
@@ -58,8 +88,53 @@ def _pack_typed_arrays(value: Any) -> Any:
 
 
 def to_cbor(message: Any) -> bytes:
-    """Encode ``message`` as CBOR with ``float32[]`` fields as typed arrays."""
+    """Encode ``message`` as CBOR: numeric arrays as typed arrays, ``uint8[]`` as bytes.
+
+    Raises:
+        ValueError: a ``TypedSequence`` holds a value its element type cannot (300 in a
+            ``uint8[]``).
+    """
     return cbor2.dumps(_pack_typed_arrays(message))
+
+
+def _ascii_escape(match: re.Match[str]) -> str:
+    code = ord(match.group())
+    if code < 0x10000:
+        return f"\\u{code:04x}"
+    code -= 0x10000
+    return f"\\u{0xD800 + (code >> 10):04x}\\u{0xDC00 + (code & 0x3FF):04x}"
+
+
+def png_frame(text: str) -> str:
+    """The ``{"op": "png", "data"}`` frame of the JSON text ``text`` (rosbridge's PNG).
+
+    The text is written with JSON escapes (backslash-u) for non-ASCII characters first (what
+    rosbridge's encoder writes): a browser's roslibjs reads one character per byte.
+    """
+    from PIL import Image  # only for clients that ask for PNG
+
+    data = _NON_ASCII.sub(_ascii_escape, text).encode("ascii")
+    width = max(1, math.floor(math.sqrt(len(data) / 3)))
+    height = max(1, math.ceil(len(data) / 3 / width))
+    pixels = data + PNG_PADDING * (width * height * 3 - len(data))
+    buffer = io.BytesIO()
+    Image.frombytes("RGB", (width, height), pixels).save(buffer, "png")
+    return to_json({"op": "png", "data": base64.b64encode(buffer.getvalue()).decode()})
+
+
+def cbor_raw_frame(topic: str, cdr: bytes, time_s: float) -> bytes:
+    """The ``cbor-raw`` frame of a message serialized as ``cdr`` (rosbridge's fields).
+
+    Args:
+        topic: the topic it was published on.
+        cdr: the message in CDR, its 4-byte encapsulation header first (what rclpy hands a
+            raw subscription).
+        time_s: when the bridge received it (s since the epoch): ``secs`` and ``nsecs``.
+    """
+    secs = math.floor(time_s)
+    nsecs = min(round((time_s - secs) * 1e9), 999_999_999)
+    return cbor2.dumps({"op": "publish", "topic": topic,
+                        "msg": {"secs": secs, "nsecs": nsecs, "bytes": bytes(cdr)}})
 
 
 MAX_NESTING = 64

@@ -20,7 +20,7 @@ from ros_nodes.rosbridge.bridge import Bridge
 from ros_nodes.rosbridge.classroom import Classroom
 from ros_nodes.rosbridge.encoding import parse_json, to_json
 from ros_nodes.rosbridge.errors import BridgeError
-from ros_nodes.rosbridge.outbox import Frame, Outbox
+from ros_nodes.rosbridge.outbox import Frame, Frames, Outbox
 from ros_nodes.rosbridge.schema import NAME_FIELDS, ProtocolError, read_operation, resolve_name
 from ros_nodes.rosbridge.session import Session
 
@@ -41,17 +41,17 @@ class PrefixingOutbox(Outbox):
         self._target = target
         self._prefix = prefix
 
-    def put_topic(self, topic: str, frame: Frame, queue_length: int) -> None:
+    def put_topic(self, topic: str, frame: Frames, queue_length: int) -> None:
         """Forward a topic frame as ``/NAME/topic`` (JSON frames only on this view)."""
-        if isinstance(frame, bytes):
+        if not isinstance(frame, str):  # CBOR, or fragments: not offered on this view
             return
         marker = f'"topic":{json.dumps(topic)}'
         renamed = frame.replace(marker, f'"topic":{json.dumps(self._prefix + topic)}', 1)
         self._target.put_topic(self._prefix + topic, renamed, queue_length)
 
-    def put_reply(self, frame: Frame) -> None:
+    def put_reply(self, frame: Frames) -> None:
         """Forward a reply with its service or topic name prefixed."""
-        if isinstance(frame, bytes):
+        if not isinstance(frame, str):
             return
         message = json.loads(frame)
         for key in ("service", "topic"):
@@ -96,6 +96,12 @@ class InstructorView:
         message: Any = None
         try:
             op, message = read_operation(frame, parse_json)
+            if op == "fragment":  # put together here, then routed as one frame
+                text = session.fragments.add(message)
+                if text is not None:
+                    self.handle(session, text)
+                return
+            message.pop("fragment_size", None)  # rewritten as text: not fragmented either
             field = NAME_FIELDS.get(op)
             if field is None:  # set_level, auth: for every robot this view touches
                 if op == "set_level":

@@ -40,7 +40,19 @@ class ClientLimits:
         max_subscriptions: topics one client may subscribe to at once.
         max_advertised: topics one client may advertise at once.
         max_services: services one client may offer at once.
+        max_actions: actions one client may offer (``advertise_action``) at once.
+        max_goals: action goals one client may have pending at once (sent and not yet
+            answered); beyond it a goal is answered at once with a failed ``action_result``.
+        max_goals_per_action: goals pending at once on one client-provided action, from all
+            senders: what its server is asked to hold; beyond it a goal fails at once.
         max_latched_bytes: largest message a client may publish with ``latch: true``.
+        max_fragments: most ``fragment`` ops one incoming message may be split into (a
+            message of ``max_frame_bytes`` in fragments of 1 KiB); a larger ``total`` is
+            refused. What the incomplete messages hold together is within
+            ``max_frame_bytes``.
+        max_partial_messages: fragmented messages one client may have incomplete at once.
+        fragment_timeout_s: an incomplete fragmented message that gets no fragment for this
+            long is dropped, with an error to the client (s).
         relay_bytes_per_s: bytes/s of messages one client may have relayed to others (one
             second of burst); messages beyond it are dropped with an error to the sender.
         handling_share: fraction of one core the server spends on one client's input,
@@ -63,7 +75,13 @@ class ClientLimits:
     max_subscriptions: int = 64
     max_advertised: int = 32
     max_services: int = 16
+    max_actions: int = 16
+    max_goals: int = 32
+    max_goals_per_action: int = 64
     max_latched_bytes: int = 64 << 10
+    max_fragments: int = 1024
+    max_partial_messages: int = 16
+    fragment_timeout_s: float = 30.0
     relay_bytes_per_s: int = 256 << 10
     handling_share: float = 0.05
     handling_burst_s: float = 0.2

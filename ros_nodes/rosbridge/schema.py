@@ -5,7 +5,7 @@ it, and by the tests and the fuzzer. Every number has a documented range and eve
 length bound, so nothing unvalidated reaches a queue, a timer or the physics. Fields not
 listed are accepted and ignored, as rosbridge does (clients send extras).
 
-Each op that names a topic or service names it in one field (``NAME_FIELDS``): that field,
+Each op that names a topic, service or action names it in one field (``NAME_FIELDS``): that field,
 and only that one, is resolved as ROS resolves names and checked by the allow-list, whatever
 other fields the message has.
 """
@@ -15,6 +15,7 @@ from __future__ import annotations
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from enum import IntEnum
 from typing import Any
 
 MAX_ID_CHARS = 256
@@ -37,13 +38,30 @@ MAX_NAME_CHARS = 256
 """Longest topic or service name."""
 
 MAX_FRAGMENT_SIZE = 2**31 - 1
+MAX_FRAGMENT_NUMBER = 2**31 - 1
+"""Largest ``num`` and ``total`` of a ``fragment`` (a client's ``max_fragments`` is less)."""
 MAX_TIMEOUT_S = 3600.0
 
 STATUS_LEVELS = ("info", "warning", "error", "none")
 """``set_level`` levels, least severe first; a client hears statuses at or above its level."""
 
 COMPRESSIONS = ("none", "cbor", "png", "cbor-raw")
-"""Compressions clients may ask for; ``png`` and ``cbor-raw`` are served as ``none``."""
+"""Compressions clients may ask for, as rosbridge serves them (``encoding``): ``cbor`` a
+binary frame with typed arrays, ``png`` the JSON text as a PNG image in ``{"op": "png"}``,
+``cbor-raw`` the message's CDR bytes in a binary frame. ``call_service`` and
+``send_action_goal`` accept the field and, as rosbridge, answer in JSON whatever it says."""
+
+
+class GoalStatus(IntEnum):
+    """``action_msgs/msg/GoalStatus``: the ``status`` of an ``action_result``."""
+
+    UNKNOWN = 0
+    ACCEPTED = 1
+    EXECUTING = 2
+    CANCELING = 3
+    SUCCEEDED = 4
+    CANCELED = 5
+    ABORTED = 6
 
 
 @dataclass(frozen=True)
@@ -71,8 +89,13 @@ ID = Field((str, int), maximum=MAX_ID_CHARS)
 TOPIC = Field((str,), True, maximum=MAX_NAME_CHARS)
 SERVICE = Field((str,), True, maximum=MAX_NAME_CHARS)
 TYPE = Field((str,), maximum=MAX_TYPE_CHARS)
-FRAGMENT_SIZE = Field((int,), minimum=1, maximum=MAX_FRAGMENT_SIZE)
+FRAGMENT_SIZE = Field((int, type(None)), minimum=1, maximum=MAX_FRAGMENT_SIZE)
+"""The longest JSON frame the client is sent (``null``: no limit); see ``CLIENT_SETTINGS``."""
 COMPRESSION = Field((str,), choices=COMPRESSIONS)
+ACTION = Field((str,), True, maximum=MAX_NAME_CHARS)
+GOAL_ID = Field((str, int), True, maximum=MAX_ID_CHARS)
+"""The id of a pending goal: the server's own (``action_feedback``, ``action_result``) or
+the sender's (``cancel_action_goal``)."""
 
 OP_FIELDS: Mapping[str, Mapping[str, Field]] = {
     "advertise": {"topic": TOPIC, "type": Field((str,), True, maximum=MAX_TYPE_CHARS),
@@ -94,19 +117,47 @@ OP_FIELDS: Mapping[str, Mapping[str, Field]] = {
     "advertise_service": {"service": SERVICE,
                           "type": Field((str,), True, maximum=MAX_TYPE_CHARS)},
     "unadvertise_service": {"service": SERVICE},
+    "advertise_action": {"action": ACTION, "type": Field((str,), True, maximum=MAX_TYPE_CHARS),
+                         "id": ID},
+    "unadvertise_action": {"action": ACTION, "id": ID},
+    "send_action_goal": {"action": ACTION,
+                         "action_type": Field((str,), True, maximum=MAX_TYPE_CHARS),
+                         "id": ID, "args": Field((dict, list)), "feedback": Field((bool,)),
+                         "fragment_size": FRAGMENT_SIZE, "compression": COMPRESSION},
+    "cancel_action_goal": {"action": ACTION, "id": GOAL_ID},
+    "action_feedback": {"action": ACTION, "id": GOAL_ID, "values": Field((dict,))},
+    "action_result": {"action": ACTION, "id": GOAL_ID, "values": Field((dict,)),
+                      "status": Field((int,), True, minimum=min(GoalStatus),
+                                      maximum=max(GoalStatus)),
+                      "result": Field((bool,), True)},
     "set_level": {"level": Field((str,), True, choices=STATUS_LEVELS), "id": ID},
+    "fragment": {"id": Field((str, int), True, maximum=MAX_ID_CHARS),
+                 "data": Field((str,), True),
+                 "num": Field((int,), True, minimum=0, maximum=MAX_FRAGMENT_NUMBER),
+                 "total": Field((int,), True, minimum=1, maximum=MAX_FRAGMENT_NUMBER)},
     "auth": {},
 }
 """Every operation and its fields."""
 
+CLIENT_SETTINGS: Mapping[str, Field] = {"fragment_size": FRAGMENT_SIZE}
+"""Fields any op may carry that set the client's own settings, whatever the op (rosbridge's
+``Protocol.incoming``): the client's ``fragment_size`` is the last one it sent."""
+
 NAME_FIELDS: Mapping[str, str] = {
-    op: "topic" if "topic" in fields else "service"
-    for op, fields in OP_FIELDS.items() if "topic" in fields or "service" in fields}
-"""The one field of each op that names its topic or service."""
+    op: name for op, fields in OP_FIELDS.items()
+    for name in ("topic", "service", "action") if name in fields}
+"""The one field of each op that names its topic, service or action."""
 
 
 class ProtocolError(ValueError):
-    """An incoming message is not a valid rosbridge operation; the reason says why."""
+    """An incoming message is not a valid rosbridge operation; the reason says why.
+
+    Attributes:
+        message: the decoded JSON object whose fields were invalid (None: it was not one),
+            so that a refused call or goal can still be answered under its id.
+    """
+
+    message: dict[str, Any] | None = None
 
 
 def _describe(value: Any) -> str:
@@ -136,6 +187,9 @@ def check_fields(message: Mapping[str, Any]) -> str:
                 raise ProtocolError(f"{op}: missing field '{name}'")
             continue
         _check_value(op, name, spec, message[name])
+    for name, spec in CLIENT_SETTINGS.items():
+        if name in message and name not in fields:
+            _check_value(op, name, spec, message[name])
     return op
 
 
@@ -154,7 +208,7 @@ def _check_value(op: str, name: str, spec: Field, value: Any) -> None:
             raise ProtocolError(f"{op}: field '{name}' is longer than {spec.maximum:g} "
                                 f"characters ({len(value)})")
     elif isinstance(value, (int, float)) and not isinstance(value, bool):
-        if spec is ID:
+        if name == "id":  # ID or GOAL_ID: a number id is bounded by value, not length
             if abs(value) > MAX_ID_INTEGER:
                 raise ProtocolError(f"{op}: field 'id' must be within ±2^53, got "
                                     f"{_describe(value)}")
@@ -179,22 +233,35 @@ def echoable_id(message: Any) -> Any:
 def read_operation(frame: str | bytes, parse: Callable[[str], Any]) -> tuple[str, dict[str, Any]]:
     """One incoming frame as a validated operation: (op, message).
 
+    A binary frame is read as JSON text in UTF-8, as rosbridge_server reads it (CBOR is only
+    ever sent, never read, by rosbridge 2.x).
+
     Args:
         frame: the WebSocket message.
         parse: the JSON decoder (``encoding.parse_json``).
 
     Raises:
-        ProtocolError: a binary frame, invalid JSON, not an object, or invalid fields.
+        ProtocolError: a binary frame that is not UTF-8, invalid JSON, not an object, or
+            invalid fields.
     """
     if isinstance(frame, bytes):
-        raise ProtocolError("binary frames are not accepted; send JSON text")
+        try:
+            frame = frame.decode("utf-8")
+        except UnicodeDecodeError as error:
+            raise ProtocolError(f"a binary frame must hold JSON text in UTF-8, as rosbridge "
+                                f"reads it (CBOR is not read): byte {error.start} is not "
+                                "UTF-8") from None
     try:
         message = parse(frame)
     except ValueError as error:
         raise ProtocolError(f"invalid JSON: {error}") from None
     if not isinstance(message, dict):
         raise ProtocolError(f"expected a JSON object, got {type(message).__name__}")
-    return check_fields(message), message
+    try:
+        return check_fields(message), message
+    except ProtocolError as error:
+        error.message = message
+        raise
 
 
 NAME_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
