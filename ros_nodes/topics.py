@@ -19,10 +19,12 @@ class TopicSpec:
         type: the ROS 2 type, ``pkg/msg/Type``.
         direction: ``"in"`` (the robot subscribes) or ``"out"`` (the robot publishes).
         every_ticks: published every this many 50 ms ticks; 0 for latched topics, which are
-            sent once to every new subscriber (transient local).
+            sent once to every new subscriber (transient local), and for event topics.
         qos: ``"reliable"``, ``"sensor_data"`` (best effort, like lidar drivers) or
             ``"transient_local"``.
         description: what it carries.
+        event: published when something happens (a log line, a parameter change), not per
+            tick and not latched.
     """
 
     name: str
@@ -31,16 +33,17 @@ class TopicSpec:
     every_ticks: int
     qos: str
     description: str
+    event: bool = False
 
     @property
     def rate_hz(self) -> float:
-        """Publishing rate (Hz); 0 for latched and input topics."""
+        """Publishing rate (Hz); 0 for latched, event and input topics."""
         return 1.0 / (self.every_ticks * TICK_PERIOD_S) if self.every_ticks else 0.0
 
     @property
     def latched(self) -> bool:
         """True for topics sent once to every subscriber."""
-        return self.direction == "out" and self.every_ticks == 0
+        return self.direction == "out" and self.every_ticks == 0 and not self.event
 
 
 CMD_VEL = TopicSpec("/cmd_vel", "geometry_msgs/msg/Twist", "in", 0, "reliable",
@@ -65,6 +68,17 @@ PUBLISHED_TOPICS = tuple(spec for spec in ROBOT_TOPICS if spec.direction == "out
 
 NODE_NAME = "/virtual_robot"
 """The robot node's name, as on the real robot and in the Docker stack."""
+
+ROSOUT = TopicSpec("/rosout", "rcl_interfaces/msg/Log", "out", 0, "transient_local",
+                   "the node's log lines (start, reset, parameter changes, refused commands)",
+                   event=True)
+PARAMETER_EVENTS = TopicSpec("/parameter_events", "rcl_interfaces/msg/ParameterEvent", "out", 0,
+                             "reliable", "every parameter declared or changed, with its node",
+                             event=True)
+NODE_TOPICS = (ROSOUT, PARAMETER_EVENTS)
+"""What every ROS 2 node publishes besides its own topics: rclpy does it for the virtual_robot
+node on a graph; the embedded bridge publishes them for the simulator
+(``rosbridge.rosout``)."""
 
 RESET_SERVICE = "/reset_simulation"
 """``std_srvs/srv/Empty``: back to spawn with odometry zeroed (as gazebo_ros offers it)."""

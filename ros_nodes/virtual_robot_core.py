@@ -43,6 +43,7 @@ class VirtualRobot:
         clock: wall clock for stamps (s since the epoch), as a real robot stamps its messages.
 
     Attributes:
+        clock: the wall clock the stamps come from (s since the epoch).
         listeners: called with every tick's publications, after ``step`` computed them (the
             rclpy node of ``websim serve --ros`` publishes them on the ROS graph with one).
     """
@@ -51,7 +52,7 @@ class VirtualRobot:
         self.sim = sim
         self.parameters = RobotParameters(sim)
         self.listeners: list[Callable[[list[Publication]], None]] = []
-        self._clock = clock
+        self.clock = clock
         self._ticks_since_command = 0
         self.collisions = 0
         """Times the robot ran into a wall (ticks where a contact began) since it started."""
@@ -106,7 +107,7 @@ class VirtualRobot:
     def publications(self, scan: bool = True,
                      wanted: Container[str] | None = None) -> list[Publication]:
         """The messages due at the tick just advanced to (arguments as ``step``'s)."""
-        now = self._clock()
+        now = self.clock()
         state = self.sim.state()
         noise = self.sim.noise
         pose_variance = (ODOM_POSE_VARIANCE,) * 3
@@ -133,7 +134,7 @@ class VirtualRobot:
 
     def latched(self) -> list[Publication]:
         """The transient-local messages: /tf_static (base_link -> laser) and /world."""
-        now = self._clock()
+        now = self.clock()
         lidar = self.sim.lidar.params
         laser = transform_stamped_msg(now, BASE_FRAME, LASER_FRAME, lidar.mount_x_m,
                                       lidar.mount_y_m, lidar.mount_yaw_rad)

@@ -417,12 +417,12 @@ def test_rosapi_topics_types_and_params(rig: Rig) -> None:
     assert "/virtual_robot:mass_kg" in names
     assert rig.call(client, "/rosapi/get_param", {"name": "/virtual_robot:mass_kg",
                                                   "default_value": ""})["values"] == {
-        "value": "1.2"}
+        "value": "1.2", "successful": True, "reason": ""}
     refused = rig.call(client, "/rosapi/set_param", {"name": "/virtual_robot:mass_kg",
-                                                     "value": "3.0"})
-    assert refused["result"] is False and "admin" in refused["values"]
+                                                     "value": "3.0"})["values"]
+    assert refused["successful"] is False and "admin" in refused["reason"]
     assert rig.call(admin, "/rosapi/set_param", {"name": "/virtual_robot:mass_kg",
-                                                 "value": "3.0"})["result"] is True
+                                                 "value": "3.0"})["values"]["successful"]
     assert rig.robot.sim.params.mass_kg == 3.0
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
+from physics import ConfigError
 from ros_nodes.rosbridge.bridge import Bridge
 from ros_nodes.rosbridge.robot_services import add_robot_services
 from ros_nodes.rosbridge.session import Session
@@ -29,6 +30,7 @@ class RobotEndpoint:
         last_driver: the address of the client whose /cmd_vel the robot took last (None: none
             yet).
         last_drive_s: when it did (monotonic s), None before.
+        log: the robot node's /rosout and /parameter_events.
     """
 
     def __init__(self, bridge: Bridge, robot: VirtualRobot) -> None:
@@ -39,12 +41,16 @@ class RobotEndpoint:
         for spec in PUBLISHED_TOPICS:
             bridge.topics.own(spec.name, spec.type)
         bridge.topics.subscribe_local(CMD_VEL.name, CMD_VEL.type, self._on_cmd_vel)
-        add_robot_services(bridge, robot)
+        self.log = add_robot_services(bridge, robot)
         for spec, msg in robot.latched():
             bridge.publish(spec.name, msg, latch=True)
 
     def _on_cmd_vel(self, msg: Any, publisher: Session) -> None:
-        self.robot.on_cmd_vel(msg)  # raises ConfigError: the reason goes to the publisher
+        try:
+            self.robot.on_cmd_vel(msg)
+        except ConfigError as error:  # the reason also goes back to the publisher
+            self.log.warning(f"/cmd_vel refused: {error}")
+            raise
         self.last_driver = publisher.peer
         self.last_drive_s = time.monotonic()
 

@@ -175,6 +175,8 @@ class RobotHost:
         self._last_client_s = clock()
         self.bridge.services.add(STATUS_SERVICE, "websim/srv/RobotStatus", self._status)
         self.bridge.services.add(PAUSE_SERVICE, "websim/srv/Pause", self._pause)
+        sim = robot.sim
+        self.endpoint.log.info(f"world '{sim.world.name}', {sim.mode} mode")
 
     async def run_ticks(self) -> None:
         """Tick this robot alone, forever."""
@@ -268,6 +270,7 @@ class RobotHost:
         """Put the robot back at spawn (a finite state) after a fault."""
         self.stats.resets += 1
         log.error("robot reset to its spawn pose: %s", why)
+        self.endpoint.log.error(f"reset to the spawn pose: {why}")
         try:
             self.robot.reset()
         except Exception as error:

@@ -3,15 +3,15 @@
 * ``/virtual_robot/{get,set,list,describe}_parameters`` and ``get_parameter_types``
   (``rcl_interfaces/srv``), so the admin page and ``ros2 param`` speak one language;
 * ``/reset_simulation`` (``std_srvs/srv/Empty``), as gazebo_ros offers it;
-* the rosapi services roslibjs calls (``getTopics``, ``Param``...), parameter names in ROS 2's
-  ``/node:param`` form and values as JSON strings.
+* rosapi's services (``rosapi``), parameter names in ROS 2's ``/node:param`` form and values
+  as JSON strings;
+* the node's ``/rosout`` and ``/parameter_events`` (``rosout.RobotLog``).
 
 Changing parameters needs admin rights (the token in the WebSocket URL); reading does not.
 """
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from typing import Any
 
@@ -26,22 +26,14 @@ from ros_nodes.parameters import (
     value_from_parameter_value,
 )
 from ros_nodes.rosbridge.bridge import Bridge
-from ros_nodes.rosbridge.encoding import parse_json
 from ros_nodes.rosbridge.errors import ServiceError
+from ros_nodes.rosbridge.rosapi import ADMIN_HINT, add_rosapi, require_admin
+from ros_nodes.rosbridge.rosout import RobotLog
 from ros_nodes.rosbridge.session import Session
 from ros_nodes.topics import NODE_NAME, PARAMETER_SERVICES, RESET_SERVICE
 from ros_nodes.virtual_robot_core import VirtualRobot
 
-OTHER_NODES = ("/rosbridge_websocket", "/rosapi")
-"""Nodes a real rosbridge deployment shows next to the robot."""
-
-ADMIN_HINT = "connect with the admin token: ws://HOST:9090/?token=TOKEN"
-
-
-def require_admin(session: Session, action: str) -> None:
-    """Raise unless ``session`` presented the admin token; the one access check."""
-    if not session.is_admin:
-        raise ServiceError(f"{action} needs admin rights; {ADMIN_HINT}")
+__all__ = ["ADMIN_HINT", "add_robot_services", "require_admin"]
 
 
 def _names(args: Mapping[str, Any], field: str = "names") -> list[str]:
@@ -52,9 +44,10 @@ def _names(args: Mapping[str, Any], field: str = "names") -> list[str]:
     return names
 
 
-def add_robot_services(bridge: Bridge, robot: VirtualRobot) -> None:
-    """Register every embedded service on ``bridge`` for ``robot``."""
+def add_robot_services(bridge: Bridge, robot: VirtualRobot) -> RobotLog:
+    """Register every embedded service on ``bridge`` for ``robot``; its node's log."""
     params = robot.parameters
+    log = RobotLog(bridge, robot)
     prefix = NODE_NAME
 
     def get_parameters(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
@@ -113,6 +106,7 @@ def add_robot_services(bridge: Bridge, robot: VirtualRobot) -> None:
 
     def reset(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
         robot.reset()
+        log.info(f"{RESET_SERVICE}: back to the spawn pose, odometry zeroed")
         return {}
 
     handlers = {"get_parameters": get_parameters, "set_parameters": set_parameters,
@@ -121,62 +115,5 @@ def add_robot_services(bridge: Bridge, robot: VirtualRobot) -> None:
     for name, type_name in PARAMETER_SERVICES.items():
         bridge.services.add(f"{prefix}/{name}", type_name, handlers[name])
     bridge.services.add(RESET_SERVICE, "std_srvs/srv/Empty", reset)
-    _add_rosapi(bridge, params)
-
-
-def _split_param_name(name: Any) -> str:
-    """``/virtual_robot:mass_kg`` -> ``mass_kg``; ServiceError for other nodes' names."""
-    if not isinstance(name, str) or ":" not in name:
-        raise ServiceError(f"name: expected '{NODE_NAME}:PARAM', got {name!r}")
-    node, param = name.split(":", 1)
-    if node != NODE_NAME:
-        raise ServiceError(f"no node {node} here (parameters live on {NODE_NAME})")
-    return param
-
-
-def _add_rosapi(bridge: Bridge, params: RobotParameters) -> None:
-    def topics(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
-        known = sorted(bridge.topic_types().items())
-        return {"topics": [name for name, _ in known], "types": [t for _, t in known]}
-
-    def topic_type(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
-        return {"type": bridge.topic_types().get(str(args.get("topic", "")), "")}
-
-    def services(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
-        return {"services": sorted(bridge.services.types())}
-
-    def service_type(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
-        return {"type": bridge.services.types().get(str(args.get("service", "")), "")}
-
-    def nodes(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
-        return {"nodes": [NODE_NAME, *OTHER_NODES]}
-
-    def get_param_names(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
-        return {"names": [f"{NODE_NAME}:{name}" for name in params.names()]}
-
-    def get_param(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
-        try:
-            param = _split_param_name(args.get("name"))
-        except ServiceError:
-            return {"value": str(args.get("default_value", ""))}
-        if param not in params.names():
-            return {"value": str(args.get("default_value", ""))}
-        return {"value": json.dumps(params.get(param))}
-
-    def set_param(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
-        require_admin(session, "set_param")
-        param = _split_param_name(args.get("name"))
-        try:
-            value = parse_json(str(args.get("value")))
-        except ValueError as error:
-            raise ServiceError(f"value: expected a JSON string, got "
-                               f"{shorten_value(args.get('value'))}: {error}") from None
-        params.set(param, value)
-        return {}
-
-    for name, handler in (("topics", topics), ("topic_type", topic_type),
-                          ("services", services), ("service_type", service_type),
-                          ("nodes", nodes), ("get_param_names", get_param_names),
-                          ("get_param", get_param), ("set_param", set_param)):
-        type_name = "rosapi_msgs/srv/" + "".join(p.title() for p in name.split("_"))
-        bridge.services.add(f"/rosapi/{name}", type_name, handler)
+    add_rosapi(bridge, robot)
+    return log
