@@ -12,6 +12,15 @@ latency to every ROS message and burn CPU while idle.
 Two nodes share one rclpy ``Context`` (no global state; rclpy's signal handlers stay off, the
 server handles SIGINT and SIGTERM): ``virtual_robot`` and ``rosbridge_websocket``, the relay
 behind ``GraphRelay``, as a real rosbridge deployment names it.
+
+Latched topics: the relay has one rclpy subscription per topic, however many browsers
+subscribe, so only the first browser would get a transient-local topic's history. Its
+messages are therefore latched in the bridge (``Bridge.publish(..., latch=True)``), which
+sends the newest to each later subscriber, as rosbridge gives each new client the history;
+a later rclpy subscription's replay of what was already relayed is not relayed again. A
+subscription's QoS follows the topic's publishers (``publisher_qos``): one made before they
+were discovered (a browser subscribing to /map before the map server starts) is made again
+on the next ``poll`` once they are, so the history reaches it then.
 """
 
 from __future__ import annotations
@@ -32,6 +41,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
 from ros_nodes.messages import Message, normalize_type
+from ros_nodes.ros_actions import RosActions
 from ros_nodes.ros_interop import (
     MessageConversionError,
     PublisherFilter,
@@ -39,6 +49,7 @@ from ros_nodes.ros_interop import (
     to_dict,
     to_message,
 )
+from ros_nodes.ros_services import Answer, Forward, GraphServices
 from ros_nodes.rosbridge.bridge import Bridge
 from ros_nodes.rosbridge.errors import BridgeError
 from ros_nodes.virtual_robot import VirtualRobotNode
@@ -53,7 +64,15 @@ CALL_TIMEOUT_S = 2.0
 """How long an rclpy callback waits for the event loop to answer (a parameter change)."""
 
 RELAY_DEPTH = 10
-"""History depth of relay publishers and subscriptions (rosbridge's default queue size)."""
+"""History depth of relay publishers, and of subscriptions to best-effort publishers
+(rosbridge's default queue size): sensor streams, where the newest matters."""
+
+RELIABLE_RELAY_DEPTH = 1000
+"""History depth of a subscription to reliable publishers: what DDS may hold for the relay
+while the executor thread catches up. rosbridge keeps 10, so a burst a ROS node publishes at
+full speed (tens of thousands per second, faster than Python takes them) loses all but the
+last ten before any client could get them; with 1000, a burst of 1000 reaches a queue_length
+0 subscriber whole (benchmarks/ros_burst.py)."""
 
 T = TypeVar("T")
 
@@ -113,11 +132,27 @@ def publisher_qos(endpoints: list[Any]) -> QoSProfile:
     reliable = all(e.qos_profile.reliability == ReliabilityPolicy.RELIABLE for e in endpoints)
     latched = bool(endpoints) and all(
         e.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for e in endpoints)
-    return QoSProfile(depth=RELAY_DEPTH,
+    return QoSProfile(depth=RELIABLE_RELAY_DEPTH if reliable else RELAY_DEPTH,
                       reliability=ReliabilityPolicy.RELIABLE if reliable
                       else ReliabilityPolicy.BEST_EFFORT,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
                       else DurabilityPolicy.VOLATILE)
+
+
+Deliver = Callable[[str, Message, bool], None]
+"""``deliver(topic, msg_dict, latched)``: a message from the graph; ``latched``: its topic is
+transient local (every publisher's durability), so the bridge keeps it for later subscribers."""
+
+
+def publisher_key(info: Mapping[str, Any]) -> tuple[bytes, int]:
+    """(publisher GID, position in its stream) of a received message's ``MessageInfo``.
+
+    The position is the publication sequence number, or the source timestamp (ns) where the
+    middleware has no sequence numbers; 0: neither is known.
+    """
+    gid = info.get("publisher_gid")
+    number = info.get("publication_sequence_number") or info.get("source_timestamp") or 0
+    return (bytes(gid["data"]) if gid else b""), int(number)
 
 
 class GraphRelay:
@@ -128,16 +163,24 @@ class GraphRelay:
 
     Args:
         node: the relay node (``rosbridge_websocket``).
-        deliver: ``deliver(topic, msg_dict)`` gets every message from the graph; it must be
-            safe to call from the executor thread.
+        deliver: gets every message from the graph (``Deliver``); it must be safe to call from
+            the executor thread.
     """
 
-    def __init__(self, node: Node, deliver: Callable[[str, Message], None]) -> None:
+    def __init__(self, node: Node, deliver: Deliver) -> None:
         self._node = node
         self._deliver = deliver
         self._subscriptions: dict[str, Any] = {}
         self._waiting: set[str] = set()
         self._publishers: dict[str, tuple[Any, Any]] = {}
+        self.services: GraphServices | None = None
+        """Service calls and client-provided services (set once the executor exists)."""
+        self._qos: dict[str, tuple[str, QoSProfile]] = {}
+        """Each subscription's type and QoS, to make it again when the publishers change."""
+        self._relayed: dict[str, dict[bytes, int]] = {}
+        """Per topic, per publisher GID: the position of the newest message relayed
+        (``publisher_key``), kept across subscriptions so a replay of a transient-local
+        history is not relayed twice; only the topic's current publishers are kept."""
 
     def topic_types(self) -> Mapping[str, str]:
         """Topics on the graph, each with its first type."""
@@ -164,19 +207,49 @@ class GraphRelay:
             cls = message_class(type_name)
         except MessageConversionError as error:
             raise BridgeError(str(error)) from None
-        qos = publisher_qos(self._node.get_publishers_info_by_topic(topic))
+        publishers = self._node.get_publishers_info_by_topic(topic)
+        qos = publisher_qos(publishers)
+        latched = qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
+        relayed = self._relayed_from(topic, publishers)
         own = PublisherFilter(self._node, topic, self._node.get_name())
         deliver = self._deliver
 
         def relay(msg: Any, info: Any) -> None:
-            if not own.is_from(info):
-                deliver(topic, to_dict(msg))
+            if own.is_from(info):
+                return
+            gid, position = publisher_key(info)
+            if position and position <= relayed.get(gid, 0):
+                return  # relayed (and latched) already: a replay for a new subscription
+            relayed[gid] = position
+            deliver(topic, to_dict(msg), latched)
 
+        old = self._subscriptions.pop(topic, None)
+        if old is not None:
+            self._node.destroy_subscription(old)
         self._subscriptions[topic] = self._node.create_subscription(cls, topic, relay, qos)
+        self._qos[topic] = (type_name, qos)
         self._waiting.discard(topic)
 
+    def _relayed_from(self, topic: str, publishers: list[Any]) -> dict[bytes, int]:
+        """What was relayed of ``topic`` from its current ``publishers`` (``_relayed``)."""
+        live = {bytes(endpoint.endpoint_gid) for endpoint in publishers}
+        kept = {gid: position for gid, position in self._relayed.get(topic, {}).items()
+                if gid in live}
+        self._relayed[topic] = kept
+        return kept
+
     def poll(self) -> None:
-        """Start subscriptions that waited for their topic to appear on the graph."""
+        """Start the subscriptions that wait for their topic; redo those whose QoS is stale.
+
+        A subscription's QoS is stale when the topic's publishers now call for another
+        (``publisher_qos``): made before they were discovered, or before they changed.
+        """
+        for topic, (type_name, qos) in list(self._qos.items()):
+            publishers = self._node.get_publishers_info_by_topic(topic)
+            wanted = publisher_qos(publishers)
+            if publishers and (wanted.durability, wanted.reliability) != \
+                    (qos.durability, qos.reliability):
+                self._create_subscription(topic, type_name)
         if not self._waiting:
             return
         types = self.topic_types()
@@ -190,6 +263,7 @@ class GraphRelay:
     def unsubscribe(self, topic: str) -> None:
         """Stop relaying ``topic`` from the graph."""
         self._waiting.discard(topic)
+        self._qos.pop(topic, None)
         subscription = self._subscriptions.pop(topic, None)
         if subscription is not None:
             self._node.destroy_subscription(subscription)
@@ -229,6 +303,31 @@ class GraphRelay:
             raise BridgeError(f"publish {topic}: {error}") from None
 
 
+    # ---- services (ros_services.GraphServices does the work) ------------------------------
+
+    def service_types(self) -> Mapping[str, str]:
+        """Services on the graph and their types (none before ``services`` is set)."""
+        return {} if self.services is None else self.services.service_types()
+
+    def call_service(self, service: str, type_name: str, args: Mapping[str, Any],
+                     answer: Answer) -> None:
+        """Call a graph service; ``answer(ok, values_or_reason)`` on the loop."""
+        if self.services is None:
+            answer(False, "the ROS graph is not ready")
+            return
+        self.services.call(service, type_name, args, answer)
+
+    def offer_service(self, service: str, type_name: str, forward: Forward) -> None:
+        """Offer a client-provided service on the graph."""
+        if self.services is not None:
+            self.services.offer(service, type_name, forward)
+
+    def withdraw_service(self, service: str) -> None:
+        """Stop offering a client-provided service on the graph."""
+        if self.services is not None:
+            self.services.withdraw(service)
+
+
 def spin_until_shutdown(executor: SingleThreadedExecutor, context: Context) -> None:
     """Spin ``executor`` until its context shuts down (the executor thread's body)."""
     try:
@@ -266,20 +365,24 @@ class RosRuntime:
             self.context.try_shutdown()
             raise
 
-        def deliver(topic: str, msg: Message) -> None:
+        def deliver(topic: str, msg: Message, latched: bool) -> None:
             with contextlib.suppress(RuntimeError):  # the loop closed while shutting down
-                loop.call_soon_threadsafe(bridge.publish, topic, msg)
+                loop.call_soon_threadsafe(bridge.publish, topic, msg, latched)
 
         self.relay = GraphRelay(self.relay_node, deliver)
         self.executor = SingleThreadedExecutor(context=self.context)
+        self.relay.services = GraphServices(self.relay_node, self.executor, loop)
         self.executor.add_node(self.robot_node)
         self.executor.add_node(self.relay_node)
+        self.actions = RosActions(self.relay_node, LoopAccess(loop).post, loop.call_later,
+                                  self.executor)
         self._thread = threading.Thread(target=self._spin, name="rclpy-executor", daemon=True)
 
     def start(self) -> None:
-        """Spin the executor and relay the bridge's topics from now on."""
+        """Spin the executor and relay the bridge's topics and actions from now on."""
         self._thread.start()
         self._bridge.graph.attach(self.relay)
+        self._bridge.actions.attach(self.actions)
 
     def _spin(self) -> None:
         spin_until_shutdown(self.executor, self.context)
@@ -291,6 +394,7 @@ class RosRuntime:
     def stop(self, timeout_s: float = 5.0) -> None:
         """Detach from the bridge, stop the executor and destroy the nodes."""
         self._bridge.graph.attach(None)
+        self._bridge.actions.attach(None)
         self.executor.shutdown(timeout_sec=timeout_s)
         self.robot_node.destroy_node()
         self.relay_node.destroy_node()

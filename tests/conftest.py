@@ -41,7 +41,7 @@ def server():
 
     running = start_server()
     yield running
-    running.stop()
+    assert running.stop() == 0, "".join(running.output)
 
 
 @pytest.fixture(scope="module")

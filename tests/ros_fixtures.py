@@ -2,7 +2,8 @@
 
 A pytest plugin (``pytest_plugins = ("ros_fixtures",)`` in the test modules that use it):
 fixtures ``domain`` (a ROS_DOMAIN_ID of this test's own, discovery kept on this machine),
-``graph``, ``test_world`` and ``start_robot``; helpers to start any node process and wait
+``graph``, ``test_world``, ``start_robot``, ``ros_server`` (``websim serve --ros`` on the test
+world) and ``ros_client`` (roslibpy connected to it); helpers to start any node process and wait
 until it publishes. Each wait polls with a bound.
 """
 
@@ -33,7 +34,7 @@ from rclpy.parameter import Parameter, parameter_value_to_python  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 
-from server_process import stop_process, wait_for  # noqa: E402
+from server_process import ServerProcess, start_server, stop_process, wait_for  # noqa: E402
 
 WALL_X_M = 2.0
 """The test world's one wall: x = 2 m, so beam 0 (straight ahead at spawn) reads 2 m."""
@@ -190,3 +191,22 @@ def start_robot(graph: Graph, test_world: Path) -> Iterator[Callable[..., RobotP
 
 def stamp_s(msg: Any) -> float:
     return float(msg.header.stamp.sec) + msg.header.stamp.nanosec * 1e-9
+
+
+@pytest.fixture
+def ros_server(domain: int, test_world: Path) -> Iterator[ServerProcess]:
+    """``websim serve --ros`` on the test world, in this test's domain; it must stop cleanly."""
+    running = start_server(["--ros", "--world", str(test_world)])
+    yield running
+    assert running.stop() == 0, "".join(running.output)
+
+
+@pytest.fixture
+def ros_client(ros_server: ServerProcess) -> Iterator[Any]:
+    """roslibpy connected to ``ros_server`` (a browser's or a student's script's view)."""
+    import roslibpy
+
+    client = roslibpy.Ros(host="127.0.0.1", port=ros_server.ws_port)
+    client.run(timeout=10)
+    yield client
+    client.close()

@@ -16,7 +16,6 @@ from typing import Any
 import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="rclpy not installed (pip install .[ros])")
-pytestmark = pytest.mark.filterwarnings("ignore:module 'sre_:DeprecationWarning")
 pytest_plugins = ("ros_fixtures",)
 """Fixtures domain, graph, test_world, start_robot."""
 

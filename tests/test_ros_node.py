@@ -12,15 +12,13 @@ import itertools
 import statistics
 import subprocess
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="rclpy not installed (pip install .[ros])")
-# rosidl's parser imports lark, which imports deprecated modules; not ours to fix.
-pytestmark = pytest.mark.filterwarnings("ignore:module 'sre_:DeprecationWarning")
 pytest_plugins = ("ros_fixtures",)
 """Fixtures domain, graph, test_world, start_robot."""
 
@@ -297,29 +295,14 @@ def test_use_sim_time_publishes_clock_and_stamps_with_it(
 # ---- websim serve --ros ------------------------------------------------------------------
 
 
-@pytest.fixture
-def ros_server(domain: int, test_world: Path) -> Iterator[ServerProcess]:
-    running = start_server(["--ros", "--world", str(test_world)])
-    yield running
-    assert running.stop() == 0, "".join(running.output)
-
-
-@pytest.fixture
-def browser(ros_server: ServerProcess) -> Iterator[roslibpy.Ros]:
-    client = roslibpy.Ros(host="127.0.0.1", port=ros_server.ws_port)
-    client.run(timeout=10)
-    yield client
-    client.close()
-
-
 def test_serve_ros_browser_and_rclpy_drive_the_same_robot(
-        graph: Graph, ros_server: ServerProcess, browser: roslibpy.Ros) -> None:
+        graph: Graph, ros_server: ServerProcess, ros_client: roslibpy.Ros) -> None:
     graph.spin_until(lambda: graph.node.count_publishers("/odom") > 0, STARTUP_TIMEOUT_S,
                      "the in-process virtual_robot node")
     ros_odom = graph.collect(Odometry, "/odom", RELIABLE)
     seen_cmd_vel = graph.collect(Twist, "/cmd_vel", RELIABLE)
     browser_odom: list[dict[str, Any]] = []
-    roslibpy.Topic(browser, "/odom", "nav_msgs/msg/Odometry").subscribe(browser_odom.append)
+    roslibpy.Topic(ros_client, "/odom", "nav_msgs/msg/Odometry").subscribe(browser_odom.append)
 
     # A student's rclpy node drives; the browser sees the motion.
     cmd_vel = graph.node.create_publisher(Twist, "/cmd_vel", 10)
@@ -329,7 +312,7 @@ def test_serve_ros_browser_and_rclpy_drive_the_same_robot(
              10.0, "the browser to see the rclpy command")
 
     # The browser drives; the rclpy node sees the motion and the command itself.
-    browser_cmd = roslibpy.Topic(browser, "/cmd_vel", "geometry_msgs/msg/Twist")
+    browser_cmd = roslibpy.Topic(ros_client, "/cmd_vel", "geometry_msgs/msg/Twist")
     browser_cmd.advertise()
     browser_cmd.publish(roslibpy.Message({"linear": {"x": 0.0, "y": 0.0, "z": 0.0},
                                           "angular": {"x": 0.0, "y": 0.0, "z": 0.5}}))
@@ -354,7 +337,7 @@ def test_serve_ros_browser_and_rclpy_drive_the_same_robot(
                      "the admin page's mass_kg in the ROS parameters")
     # And the other way: ros2 param set, seen by the browser's parameter service.
     assert [r.successful for r in graph.set_parameters(mass_kg=4.0)] == [True]
-    got = roslibpy.Service(browser, "/virtual_robot/get_parameters",
+    got = roslibpy.Service(ros_client, "/virtual_robot/get_parameters",
                            "rcl_interfaces/srv/GetParameters").call(
         roslibpy.ServiceRequest({"names": ["mass_kg"]}), timeout=5)
     assert got["values"][0]["type"] == ParameterType.PARAMETER_DOUBLE
@@ -362,10 +345,10 @@ def test_serve_ros_browser_and_rclpy_drive_the_same_robot(
 
 
 def test_serve_ros_relays_graph_topics_both_ways(
-        graph: Graph, ros_server: ServerProcess, browser: roslibpy.Ros) -> None:
+        graph: Graph, ros_server: ServerProcess, ros_client: roslibpy.Ros) -> None:
     # A topic only the ROS graph has: the browser subscribes before anyone publishes it.
     heard: list[dict[str, Any]] = []
-    roslibpy.Topic(browser, "/chatter", "std_msgs/msg/String",
+    roslibpy.Topic(ros_client, "/chatter", "std_msgs/msg/String",
                    queue_length=10).subscribe(heard.append)
     chatter = graph.node.create_publisher(String, "/chatter", 10)
     graph.spin_until(lambda: chatter.get_subscription_count() > 0, 10.0, "the relay to subscribe")
@@ -378,7 +361,7 @@ def test_serve_ros_relays_graph_topics_both_ways(
     # back to the browser through the graph.
     received = graph.collect(String, "/from_browser", RELIABLE)
     in_browser: list[dict[str, Any]] = []
-    talker = roslibpy.Topic(browser, "/from_browser", "std_msgs/msg/String", queue_length=10)
+    talker = roslibpy.Topic(ros_client, "/from_browser", "std_msgs/msg/String", queue_length=10)
     talker.subscribe(in_browser.append)
     talker.advertise()
     graph.spin_until(lambda: graph.node.count_publishers("/from_browser") > 0, 10.0,
@@ -394,7 +377,7 @@ def test_serve_ros_relays_graph_topics_both_ways(
     rclpy_talker.publish(String(data="c"))
     wait_for(lambda: any(m["data"] == "c" for m in in_browser), 10.0, "rclpy's message")
     assert [m["data"] for m in in_browser] == ["a", "b", "c"]
-    assert "/chatter" in browser.get_topics()
+    assert "/chatter" in ros_client.get_topics()
 
 
 # ---- websim serve --class --ros --------------------------------------------------------------

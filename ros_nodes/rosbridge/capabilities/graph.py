@@ -8,7 +8,7 @@ ROS. Without a graph attached every method does nothing.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
 from ros_nodes.messages import normalize_type
@@ -43,6 +43,21 @@ class Graph(Protocol):
 
     def publish(self, topic: str, msg: Any) -> None:
         """Publish a message (a dict) on an advertised ``topic``."""
+
+    def service_types(self) -> Mapping[str, str]:
+        """The services on the graph and their types (``pkg/srv/Type``)."""
+
+    def call_service(self, service: str, type_name: str, args: Mapping[str, Any],
+                     answer: Callable[[bool, Any], None]) -> None:
+        """Call a graph service; ``answer(ok, values_or_reason)`` later, on this thread."""
+
+    def offer_service(self, service: str, type_name: str,
+                      forward: Callable[[Mapping[str, Any], Callable[[bool, Any], None]],
+                                        None]) -> None:
+        """Offer a client's service on the graph; requests go to ``forward(args, answer)``."""
+
+    def withdraw_service(self, service: str) -> None:
+        """Stop offering a client's service on the graph."""
 
 
 class GraphRelay:
@@ -127,3 +142,40 @@ class GraphRelay:
             self.advertise(session, topic, type_name)
         if topic in self._advertised:
             self._graph.publish(topic, msg)
+
+    # ---- services -------------------------------------------------------------------------
+
+    def service_types(self) -> Mapping[str, str]:
+        """The graph's services and types (none without a graph)."""
+        return {} if self._graph is None else self._graph.service_types()
+
+    def call_service(self, service: str, args: Mapping[str, Any],
+                     answer: Callable[[bool, Any], None]) -> bool:
+        """Call ``service`` on the graph if it is there; False: it is not (or no graph).
+
+        Raises:
+            BridgeError: the request does not fit the service's type, or it is not installed.
+        """
+        if self._graph is None:
+            return False
+        type_name = self._graph.service_types().get(service)
+        if type_name is None:
+            return False
+        self._graph.call_service(service, type_name, args, answer)
+        return True
+
+    def offer_service(self, session: Session, service: str, type_name: str,
+                      forward: Callable[[Mapping[str, Any], Callable[[bool, Any], None]],
+                                        None]) -> None:
+        """Offer a client's service on the graph too; a failure leaves it to clients only."""
+        if self._graph is None:
+            return
+        try:
+            self._graph.offer_service(service, type_name, forward)
+        except BridgeError as error:
+            self._bridge.report(session, f"{error}; {service} is offered to clients only")
+
+    def withdraw_service(self, service: str) -> None:
+        """A client's service is gone: withdraw it from the graph."""
+        if self._graph is not None:
+            self._graph.withdraw_service(service)

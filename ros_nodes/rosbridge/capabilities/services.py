@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from physics import ConfigError
+from ros_nodes import message_types
 from ros_nodes.messages import normalize_service_type
 from ros_nodes.rosbridge.errors import BridgeError, ServiceError, shorten
 from ros_nodes.rosbridge.session import Session
@@ -30,13 +31,40 @@ ServiceHandler = Callable[[Mapping[str, Any], Session], Mapping[str, Any]]
 """An in-process service: (args, caller) -> response values; raises ``ServiceError``."""
 
 
+Answer = Callable[[bool, Any], None]
+"""``answer(ok, values_or_reason)``: how a call's outcome reaches its caller."""
+
+
 @dataclass
 class _PendingCall:
-    caller: Session
-    caller_id: Any
+    """A call relayed to a providing client, waiting for its ``service_response``.
+
+    ``caller`` is None for a call from the ROS graph (``--ros``); ``answer`` delivers it.
+    """
+
+    caller: Session | None
     service: str
     provider: Session
     deadline_s: float
+    answer: Answer
+
+
+def response_values(service_type: str | None, values: Any) -> Any:
+    """A provider's response values in canonical form, where the service type is known.
+
+    rosbridge fills the ROS response from them (defaults for what is missing, refusing what
+    the type lacks); websim does the same with the type's definition (``message_types``),
+    and passes an unknown type's values as they are.
+
+    Raises:
+        ConfigError: the values do not fit the response type.
+    """
+    response_type = f"{service_type}_Response" if service_type else None
+    if response_type is None or not message_types.known(response_type):
+        return values
+    if values in ([], None):  # roslibpy and roslibjs send [] for an empty response
+        values = {}
+    return message_types.canonical(response_type, values)
 
 
 class Services:
@@ -90,8 +118,23 @@ class Services:
         for call_id, call in list(self._pending.items()):
             if now >= call.deadline_s:
                 del self._pending[call_id]
-                self.fail(call.caller, call.caller_id, call.service,
-                          f"{call.service} did not answer within {self._timeout_s:g} s")
+                call.answer(False, f"{call.service} did not answer within "
+                                   f"{self._timeout_s:g} s")
+
+    def _answer_for(self, session: Session, call_id: Any, service: str) -> Answer:
+        """How the outcome of ``session``'s call reaches it (not at all once it has left)."""
+        def answer(ok: bool, values: Any) -> None:
+            if session not in self._bridge.sessions:
+                return
+            if not ok:
+                self.fail(session, call_id, service, shorten(str(values)))
+                return
+            response: dict[str, Any] = {"op": "service_response", "service": service,
+                                        "values": values, "result": True}
+            if call_id is not None:
+                response["id"] = call_id
+            session.reply(response)
+        return answer
 
     # ---- calls ----------------------------------------------------------------------------
 
@@ -99,10 +142,13 @@ class Services:
         service, call_id = message["service"], message.get("id")
         args = message.get("args", {})
         if service in self._providers:
-            self._forward(session, call_id, service, args)
+            self._forward(session, service, args, self._answer_for(session, call_id, service))
             return
         if service not in self._local:
-            self.fail(session, call_id, service, f"Service {service} does not exist")
+            if not self._bridge.graph.call_service(
+                    service, args if isinstance(args, dict) else {},
+                    self._answer_for(session, call_id, service)):
+                self.fail(session, call_id, service, f"Service {service} does not exist")
             return
         _, handler = self._local[service]
         if isinstance(args, list):
@@ -124,14 +170,26 @@ class Services:
             response["id"] = call_id
         session.reply(response)
 
-    def _forward(self, caller: Session, caller_id: Any, service: str, args: Any) -> None:
+    def _forward(self, caller: Session | None, service: str, args: Any,
+                 answer: Answer) -> None:
+        """Relay a call to the client providing ``service``, numbered as rosbridge does."""
         provider, _ = self._providers[service]
         count = self._call_counts[service] = self._call_counts.get(service, 0) + 1
         forward_id = f"service_request:{service}:{count}"
-        self._pending[forward_id] = _PendingCall(caller, caller_id, service, provider,
-                                                 self._bridge.clock() + self._timeout_s)
+        self._pending[forward_id] = _PendingCall(caller, service, provider,
+                                                 self._bridge.clock() + self._timeout_s,
+                                                 answer)
         provider.reply({"op": "call_service", "id": forward_id, "service": service,
                         "args": args})
+
+    def _from_graph(self, service: str) -> Callable[[Any, Answer], None]:
+        """What a call from the ROS graph to a client-provided ``service`` goes through."""
+        def forward(args: Any, answer: Answer) -> None:
+            if service not in self._providers:
+                answer(False, f"{service} is no longer provided")
+                return
+            self._forward(None, service, dict(args), answer)
+        return forward
 
     def _response(self, session: Session, message: dict[str, Any]) -> None:
         call = self._pending.get(str(message.get("id")))
@@ -139,13 +197,20 @@ class Services:
             raise BridgeError(f"service_response for {message['service']}: no call "
                               f"with id {str(message.get('id'))[:80]!r} is waiting for it")
         del self._pending[str(message["id"])]
-        response: dict[str, Any] = {"op": "service_response", "service": call.service,
-                                    "values": message.get("values", {}),
-                                    "result": message["result"]}
-        if call.caller_id is not None:
-            response["id"] = call.caller_id
-        if call.caller in self._bridge.sessions:
-            call.caller.reply(response)
+        try:
+            values = response_values(self._providers_type(session, call.service),
+                                     message.get("values", {}))
+        except ConfigError as error:  # the provider's answer does not fit the type
+            call.answer(False, f"{call.service}: the provider's response does not fit its "
+                               f"type: {shorten(str(error))}")
+            raise BridgeError(f"service_response for {call.service}: {error}") from None
+        # rosbridge 2.x makes the provider's values the ROS response and ignores its
+        # "result": the call succeeded once there is an answer of the right type.
+        call.answer(True, values)
+
+    @staticmethod
+    def _providers_type(provider: Session, service: str) -> str | None:
+        return provider.services.get(service)
 
     # ---- providing ------------------------------------------------------------------------
 
@@ -163,6 +228,7 @@ class Services:
             raise BridgeError(f"{service}: {error}") from None
         self._providers[service] = (session, type_name)
         session.services[service] = type_name
+        self._bridge.graph.offer_service(session, service, type_name, self._from_graph(service))
 
     def _unadvertise(self, session: Session, message: dict[str, Any]) -> None:
         service = message["service"]
@@ -173,7 +239,8 @@ class Services:
         session.services.pop(service, None)
         self._providers.pop(service, None)
         self._call_counts.pop(service, None)
+        self._bridge.graph.withdraw_service(service)
         for call_id, call in list(self._pending.items()):
             if call.provider is session and call.service == service:
                 del self._pending[call_id]
-                self.fail(call.caller, call.caller_id, call.service, reason)
+                call.answer(False, reason)

@@ -3,22 +3,27 @@
 The one path for every message: a client's ``publish`` and an in-process endpoint's
 (``publish``, e.g. the robot's /odom) both go through ``_deliver``, and in-process subscribers
 (``subscribe_local``, e.g. the robot's /cmd_vel) get what clients publish, as another client
-would. Messages of known types are relayed in their canonical form (``message_types``);
-other (client-defined) types are relayed as sent within the publisher's relay budget.
+would. Every message is relayed in its canonical form (``message_types``: defaults filled,
+unknown fields refused); a type websim cannot check (not among its definitions, nor with
+``--ros`` importable) is refused at advertise, subscribe and publish, as rosbridge refuses a
+type it cannot import.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable, Collection
 from typing import TYPE_CHECKING, Any
 
 from physics import ConfigError
 from ros_nodes import message_types
 from ros_nodes.messages import normalize_type
-from ros_nodes.rosbridge.encoding import to_cbor, to_json
+from ros_nodes.rosbridge import cdr
+from ros_nodes.rosbridge.encoding import cbor_raw_frame, png_frame, to_cbor, to_json
 from ros_nodes.rosbridge.errors import BridgeError
-from ros_nodes.rosbridge.outbox import Frame
+from ros_nodes.rosbridge.fragments import fragment
+from ros_nodes.rosbridge.outbox import Frames
 from ros_nodes.rosbridge.session import Session, Subscription
 
 if TYPE_CHECKING:
@@ -45,23 +50,58 @@ It raises ``ConfigError`` to refuse the message; the reason goes back to the pub
 
 
 class Encoded:
-    """One publish envelope, encoded at most once per format whatever the subscriber count."""
+    """One publish envelope, encoded at most once per format whatever the subscriber count.
+
+    A format is a compression (``schema.COMPRESSIONS``) and, for the JSON ones (``none``,
+    ``png``), a ``fragment_size``: a longer text goes as its ``fragment`` frames.
+    """
 
     def __init__(self, topic: str, msg: Any) -> None:
         self.topic = topic
         self.envelope = {"op": "publish", "topic": topic, "msg": msg}
         self._json: str | None = None
-        self._cbor: bytes | None = None
+        self._frames: dict[tuple[str, int | None], Frames] = {}
 
-    def frame(self, compression: str) -> Frame:
-        """The frame for subscribers that asked for ``compression``."""
+    def frame(self, compression: str, fragment_size: int | None = None,
+              type_name: str | None = None) -> Frames:
+        """The frames for subscribers that asked for ``compression`` and ``fragment_size``.
+
+        ``type_name``: the topic's type, for ``cbor-raw``; a message that cannot be
+        serialized gets an error ``status`` frame in its place.
+
+        Raises:
+            ValueError: the message cannot be written in this format at all.
+        """
+        binary = compression in ("cbor", "cbor-raw")
+        key = (compression, None if binary else fragment_size)
+        frames = self._frames.get(key)
+        if frames is None:
+            frames = self._frames[key] = self._encode(compression, fragment_size, type_name)
+        return frames
+
+    def _encode(self, compression: str, fragment_size: int | None,
+                type_name: str | None) -> Frames:
         if compression == "cbor":
-            if self._cbor is None:
-                self._cbor = to_cbor(self.envelope)
-            return self._cbor
+            return to_cbor(self.envelope)
+        if compression == "cbor-raw":
+            return self._cbor_raw(type_name)
         if self._json is None:
             self._json = to_json(self.envelope)
-        return self._json
+        text = png_frame(self._json) if compression == "png" else self._json
+        if fragment_size is not None and len(text) > fragment_size:
+            return fragment(text, fragment_size)
+        return text
+
+    def _cbor_raw(self, type_name: str | None) -> Frames:
+        try:
+            if type_name is None:
+                raise cdr.CdrError("its type is not known yet")
+            data = cdr.to_cdr(type_name, self.envelope["msg"])
+        except cdr.CdrError as error:
+            return to_json({"op": "status", "level": "error",
+                            "msg": f"cbor-raw: a message on {self.topic} cannot be sent as "
+                                   f"CDR: {error}"})
+        return cbor_raw_frame(self.topic, data, time.time())
 
 
 class Topics:
@@ -165,6 +205,10 @@ class Topics:
         topic = message["topic"]
         self._refuse_owned(topic)
         type_name = self._known_type(topic, message["type"])
+        try:
+            message_types.check_type(type_name, graph=self._bridge.graph.attached)
+        except ConfigError as error:
+            raise BridgeError(f"advertise {topic}: {error}") from None
         self._types[topic] = type_name
         session.advertised.setdefault(topic, {})[message.get("id")] = type_name
         self._bridge.graph.advertise(session, topic, type_name)
@@ -172,12 +216,11 @@ class Topics:
     def _unadvertise(self, session: Session, message: dict[str, Any]) -> None:
         topic = message["topic"]
         ids = session.advertised.get(topic)
-        if ids is None:
-            return
-        if "id" in message and message["id"] in ids and len(ids) > 1:
-            del ids[message["id"]]  # other ids still hold the advertisement (rosbridge)
-            return
-        self._drop_advertisement(session, topic)
+        if ids is None or message.get("id") not in ids:
+            return  # rosbridge: an id that holds nothing releases nothing
+        del ids[message.get("id")]
+        if not ids:  # the last id held it (rosbridge counts per id)
+            self._drop_advertisement(session, topic)
 
     def _drop_advertisement(self, session: Session, topic: str) -> None:
         if session.advertised.pop(topic, None) is None:
@@ -196,15 +239,15 @@ class Topics:
         topic = message["topic"]
         self._refuse_owned(topic)
         ids = session.advertised.get(topic)
-        type_name = next(iter(ids.values())) if ids else self._types.get(topic)
+        type_name = next(iter(ids.values())) if ids else self._inferred_type(topic)
         if type_name is None:
-            raise BridgeError(f"publish to {topic}: advertise it first (type unknown)")
+            raise BridgeError(f"Cannot infer topic type for topic {topic} as it is not yet "
+                              "advertised (advertise it with its type first)")
         msg = message["msg"]
-        if message_types.known(type_name):
-            try:
-                msg = message_types.canonical(type_name, msg)
-            except ConfigError as error:
-                raise BridgeError(f"publish to {topic}: {error}") from None
+        try:
+            msg = message_types.canonical(type_name, msg, graph=self._bridge.graph.attached)
+        except ConfigError as error:
+            raise BridgeError(f"publish to {topic}: {error}") from None
         size = session.frame_bytes  # what arrived: known before anything is encoded
         latch = bool(message.get("latch"))
         if latch and size > session.limits.max_latched_bytes:
@@ -225,6 +268,17 @@ class Topics:
             self._latched[topic] = encoded
         self._deliver([encoded])
         self._bridge.graph.publish(session, topic, type_name, msg)
+
+    def _inferred_type(self, topic: str) -> str | None:
+        """A publish without advertise: the type ``topic`` is known to carry (rosbridge).
+
+        Known from the simulator, another client's advertisement or subscription, or the
+        ROS graph.
+        """
+        known = self._types.get(topic)
+        if known is None:
+            known = self._bridge.graph.topic_types().get(topic)
+        return known
 
     def _deliver(self, messages: list[Encoded], now_s: float | None = None) -> None:
         """Queue ``messages`` (one tick's, or one client's publish) for their subscribers.
@@ -269,7 +323,8 @@ class Topics:
             return True
         subscription.last_sent_s = now
         try:
-            frame = encoded.frame(subscription.compression)
+            frame = encoded.frame(subscription.compression, session.fragment_size,
+                                  self._types.get(topic))
         except (TypeError, ValueError) as error:  # a message no encoder can write
             self._bridge.faults.record(f"encoding {topic}", error)
             return False
@@ -294,7 +349,11 @@ class Topics:
     def _subscribe(self, session: Session, message: dict[str, Any]) -> None:
         topic = message["topic"]
         if message.get("type"):
-            self._known_type(topic, message["type"])
+            try:
+                message_types.check_type(self._known_type(topic, message["type"]),
+                                         graph=self._bridge.graph.attached)
+            except ConfigError as error:
+                raise BridgeError(f"subscribe {topic}: {error}") from None
         limits = session.limits
         throttle_ms = float(message.get("throttle_rate", 0))  # ranges: schema.OP_FIELDS
         queue_length = int(message.get("queue_length", 0))
@@ -304,18 +363,29 @@ class Topics:
                 and len(subscription.throttle_ms) >= limits.max_ids_per_topic:
             raise BridgeError(f"subscribe {topic}: a client may hold at most "
                               f"{limits.max_ids_per_topic} subscribe ids on one topic")
+        compression = message.get("compression", "none")
+        if compression == "cbor-raw":
+            self._check_cdr(topic)
         if subscription is None:
             subscription = session.subscriptions[topic] = Subscription()
-        subscription.add(sub_id, throttle_ms, queue_length)
-        if message.get("compression") == "cbor":
-            subscription.compression = "cbor"
+        subscription.add(sub_id, throttle_ms, queue_length, compression)
         self._subscribers.setdefault(topic, set()).add(session)
         self._bridge.graph.subscribe(session, topic, message.get("type") or
                                      self._types.get(topic))
         latched = self._latched.get(topic)
         if latched is not None:
             _, length = subscription.effective()
-            session.outbox.put_topic(topic, latched.frame(subscription.compression), length)
+            frames = latched.frame(subscription.compression, session.fragment_size,
+                                   self._types.get(topic))
+            session.outbox.put_topic(topic, frames, length)
+
+    def _check_cdr(self, topic: str) -> None:
+        """Refuse ``cbor-raw`` on a topic whose known type cannot be serialized as CDR."""
+        type_name = self._types.get(topic)
+        if type_name is not None and not cdr.serializable(type_name):
+            raise BridgeError(f"subscribe {topic}: cbor-raw needs the message's CDR bytes, "
+                              f"and {type_name} is not a type websim can serialize; "
+                              "subscribe with compression 'cbor' or 'none'")
 
     def _unsubscribe(self, session: Session, message: dict[str, Any]) -> None:
         topic = message["topic"]
