@@ -15,7 +15,7 @@ from typing import Any
 from physics import MODES, ConfigError, NoiseParams, RobotParams, Simulation
 from physics.params import field_range, field_unit
 from physics.validation import as_finite_float, as_float_in_range
-from ros_nodes.messages import Message
+from ros_nodes.messages import Base64Bytes, Message
 
 # rcl_interfaces/msg/ParameterType
 PARAMETER_NOT_SET = 0
@@ -218,7 +218,7 @@ def markdown_table() -> str:
 def parameter_value_msg(value: Any) -> Message:
     """``rcl_interfaces/msg/ParameterValue`` holding a Python value (None -> NOT_SET)."""
     msg: Message = {"type": PARAMETER_NOT_SET, "bool_value": False, "integer_value": 0,
-                    "double_value": 0.0, "string_value": "", "byte_array_value": [],
+                    "double_value": 0.0, "string_value": "", "byte_array_value": Base64Bytes(""),
                     "bool_array_value": [], "integer_array_value": [],
                     "double_array_value": [], "string_array_value": []}
     if isinstance(value, bool):

@@ -36,6 +36,7 @@ from typing import Any, TypeVar
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -308,6 +309,24 @@ class GraphRelay:
     def service_types(self) -> Mapping[str, str]:
         """Services on the graph and their types (none before ``services`` is set)."""
         return {} if self.services is None else self.services.service_types()
+
+    def nodes(self) -> dict[str, tuple[list[str], list[str], list[str]]]:
+        """Each node on the graph: (topics it publishes, topics it subscribes, services)."""
+        node = self._node
+        found: dict[str, tuple[list[str], list[str], list[str]]] = {}
+        for name, namespace in node.get_node_names_and_namespaces():
+            full = f"{namespace.rstrip('/')}/{name}"
+            try:
+                found[full] = (
+                    sorted(t for t, _ in node.get_publisher_names_and_types_by_node(
+                        name, namespace)),
+                    sorted(t for t, _ in node.get_subscriber_names_and_types_by_node(
+                        name, namespace)),
+                    sorted(s for s, _ in node.get_service_names_and_types_by_node(
+                        name, namespace)))
+            except (_rclpy.NodeNameNonExistentError, RuntimeError):
+                continue  # it left between the two questions
+        return found
 
     def call_service(self, service: str, type_name: str, args: Mapping[str, Any],
                      answer: Answer) -> None:

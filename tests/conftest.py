@@ -1,4 +1,4 @@
-"""Shared fixtures: shipped worlds and small hand-made worlds for analytic checks."""
+"""Shared fixtures: shipped worlds, small hand-made worlds, a real server and its clients."""
 
 from __future__ import annotations
 
@@ -42,6 +42,17 @@ def server():
     running = start_server()
     yield running
     assert running.stop() == 0, "".join(running.output)
+
+
+@pytest.fixture
+def ros(server: Any) -> Iterator[Any]:
+    """roslibpy connected to the module's ``server``, closed after the test."""
+    import roslibpy
+
+    client = roslibpy.Ros(host="127.0.0.1", port=server.ws_port)
+    client.run(timeout=10)
+    yield client
+    client.close()
 
 
 @pytest.fixture(scope="module")

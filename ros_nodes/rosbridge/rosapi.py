@@ -7,7 +7,9 @@ robot running rosbridge shows:
 * nodes ``/virtual_robot`` (the robot's topics, parameter services and /reset_simulation),
   ``/rosbridge_websocket`` (what clients advertise, subscribe and offer), ``/rosapi`` and
   ``/rosapi_params`` (the helper node rosapi 2.0 starts), each publishing ``/rosout`` and
-  ``/parameter_events`` as every ROS 2 node does; with ``--ros`` the graph's topics too;
+  ``/parameter_events`` as every ROS 2 node does; with ``--ros`` the graph's topics and
+  nodes too (a graph node's parameters are its own ``NODE/get_parameters`` services, which
+  clients can call; rosapi's ``get_param`` covers the robot's);
 * type names in both spellings (``nav_msgs/Odometry``, ``nav_msgs/msg/Odometry``), answered
   ``pkg/msg/Type``; an unknown topic, service or type gives ``""`` or ``[]``, as rosapi does;
 * parameters named ``NODE:PARAM`` (``/virtual_robot:mass_kg``; ``virtual_robot:mass_kg`` is
@@ -92,8 +94,11 @@ def graph_nodes(bridge: Bridge) -> dict[str, NodeInfo]:
         services=sorted(client_services))
     rosapi = NodeInfo(publishing=list(node_topics),
                       services=[name for name in services if name.startswith(PREFIX)])
-    return {ROSAPI_NODE: rosapi, ROSAPI_PARAMS_NODE: NodeInfo(publishing=list(node_topics)),
-            BRIDGE_NODE: relay, NODE_NAME: robot}
+    nodes = {ROSAPI_NODE: rosapi, ROSAPI_PARAMS_NODE: NodeInfo(publishing=list(node_topics)),
+             BRIDGE_NODE: relay, NODE_NAME: robot}
+    for name, (publishing, subscribing, offered) in bridge.graph.nodes().items():
+        nodes.setdefault(name, NodeInfo(publishing, subscribing, offered))  # with --ros
+    return nodes
 
 
 def action_servers(topics: list[str]) -> list[str]:

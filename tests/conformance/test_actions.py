@@ -381,6 +381,10 @@ ROS_FIBONACCI = "test_msgs/action/Fibonacci"
 has the same fields."""
 
 
+FEEDBACK_PERIOD_S = 0.1
+"""Between two feedbacks of the graph's test server (the ROS tutorials' server waits 1 s)."""
+
+
 def assert_feedback_in_order(feedback: list[list[int]], order: int) -> None:
     """Feedback crossed the graph: each a longer Fibonacci prefix than the one before.
 
@@ -428,6 +432,8 @@ def test_serve_ros_roslibpy_goal_reaches_an_rclpy_action_server_on_the_graph(
         for term in fibonacci(goal_handle.request.order)[2:]:
             sequence.append(term)
             goal_handle.publish_feedback(Fibonacci.Feedback(sequence=sequence))
+            time.sleep(FEEDBACK_PERIOD_S)  # as the tutorials' server; its feedback topic may
+            # match the client a moment after the goal's service does
         goal_handle.succeed()
         return Fibonacci.Result(sequence=sequence)
 

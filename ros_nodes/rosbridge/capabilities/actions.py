@@ -203,10 +203,12 @@ class Actions:
         if action in self._servers:
             self._forward(sender, session, goal_id, action, type_name, args)
             return
-        graph_type = None if self._graph is None else self._graph.action_types().get(action)
-        if self._graph is None or graph_type is None:
+        if self._graph is None:
             raise BridgeError(f"Action {action} does not exist")
-        if graph_type != type_name:
+        # A server the graph has not shown yet may be starting: as rosbridge, the goal goes
+        # out with the type the client names and waits a moment for the server.
+        graph_type = self._graph.action_types().get(action)
+        if graph_type is not None and graph_type != type_name:
             raise BridgeError(f"{action} is of type {graph_type}, not {type_name}")
         key = self._register(_Goal(sender, session, goal_id, action, None))
         try:

@@ -47,6 +47,9 @@ class Graph(Protocol):
     def service_types(self) -> Mapping[str, str]:
         """The services on the graph and their types (``pkg/srv/Type``)."""
 
+    def nodes(self) -> Mapping[str, tuple[list[str], list[str], list[str]]]:
+        """Each node on the graph (full name): (topics it publishes, subscribes, services)."""
+
     def call_service(self, service: str, type_name: str, args: Mapping[str, Any],
                      answer: Callable[[bool, Any], None]) -> None:
         """Call a graph service; ``answer(ok, values_or_reason)`` later, on this thread."""
@@ -148,6 +151,10 @@ class GraphRelay:
     def service_types(self) -> Mapping[str, str]:
         """The graph's services and types (none without a graph)."""
         return {} if self._graph is None else self._graph.service_types()
+
+    def nodes(self) -> Mapping[str, tuple[list[str], list[str], list[str]]]:
+        """The graph's nodes: (published topics, subscribed topics, services) each."""
+        return {} if self._graph is None else self._graph.nodes()
 
     def call_service(self, service: str, args: Mapping[str, Any],
                      answer: Callable[[bool, Any], None]) -> bool:

@@ -1,8 +1,8 @@
-"""Services across ``websim serve --ros``, as through rosbridge: both directions.
+"""Services and rosapi across ``websim serve --ros``, as through rosbridge.
 
 A service on the ROS graph (an rclpy server in this test) is callable from a roslibpy
 client; a service a roslibpy client advertises is on the graph, and an rclpy client's call
-reaches it and gets its answer.
+reaches it and gets its answer; rosapi lists the graph's nodes with what they do.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ rclpy = pytest.importorskip("rclpy", reason="rclpy not installed (pip install .[
 pytest_plugins = ("ros_fixtures",)
 
 import roslibpy  # noqa: E402
+from std_msgs.msg import String  # noqa: E402
 from std_srvs.srv import SetBool  # noqa: E402
 
 from ros_fixtures import Graph  # noqa: E402
@@ -73,3 +74,20 @@ def test_a_call_to_a_service_nobody_offers_fails_with_the_reason(
         lambda reason: answer.update(error=reason))
     wait_for(lambda: answer, CALL_TIMEOUT_S, "the failure")
     assert "does not exist" in str(answer["error"])
+
+
+def test_rosapi_lists_the_graphs_nodes_with_their_topics_and_services(
+        graph: Graph, ros_client: roslibpy.Ros) -> None:
+    graph.node.create_publisher(String, "/from_the_graph", 10)
+    graph.node.create_service(SetBool, "/graph_node_service", lambda req, res: res)
+    node_name = graph.node.get_fully_qualified_name()
+
+    def details() -> dict[str, Any] | None:
+        if node_name not in ros_client.get_nodes():
+            return None
+        found = ros_client.get_node_details(node_name)
+        return found if "/from_the_graph" in found["publishing"] else None
+
+    found = graph.spin_until(details, CALL_TIMEOUT_S, f"{node_name} in rosapi's nodes")
+    assert "/graph_node_service" in found["services"]
+    assert "/virtual_robot" in ros_client.get_nodes(), "the robot's own entry stays"
