@@ -28,15 +28,21 @@ A request with a field the service lacks or a field of the wrong type fails the 
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from physics import ConfigError
 from ros_nodes.messages import normalize_service_type, normalize_type, stamp
-from ros_nodes.parameters import RobotParameters, shorten_value
+from ros_nodes.parameters import (
+    RobotParameters,
+    parameter_value_msg,
+    shorten_value,
+    value_from_parameter_value,
+)
 from ros_nodes.rosbridge import typedefs
 from ros_nodes.rosbridge.bridge import Bridge
+from ros_nodes.rosbridge.capabilities.services import ServiceHandler, ViaGraph
 from ros_nodes.rosbridge.encoding import parse_json
 from ros_nodes.rosbridge.errors import ServiceError, shorten
 from ros_nodes.rosbridge.session import Session
@@ -58,7 +64,7 @@ ROS_DISTRO = "humble"
 
 ADMIN_HINT = "connect with the admin token: ws://HOST:9090/?token=TOKEN"
 
-Handler = Callable[[dict[str, str], Session], Mapping[str, Any]]
+Handler = Callable[[dict[str, str], Session], "Mapping[str, Any] | ViaGraph"]
 
 
 def require_admin(session: Session, action: str) -> None:
@@ -133,7 +139,7 @@ def add_rosapi(bridge: Bridge, robot: VirtualRobot) -> None:
     params = robot.parameters
     handlers = _graph_handlers(bridge)
     handlers.update(_type_handlers(bridge))
-    handlers.update(_param_handlers(params))
+    handlers.update(_param_handlers(params, lambda: bridge.graph.nodes().keys()))
     handlers["get_time"] = lambda args, session: {"time": stamp(robot.clock())}
     handlers["get_ros_version"] = lambda args, session: {"version": ROS_VERSION,
                                                          "distro": ROS_DISTRO}
@@ -141,12 +147,11 @@ def add_rosapi(bridge: Bridge, robot: VirtualRobot) -> None:
         bridge.services.add(PREFIX + name, type_name, _checked(type_name, handlers[name]))
 
 
-def _checked(type_name: str, handler: Handler) -> Callable[[Mapping[str, Any], Session],
-                                                            Mapping[str, Any]]:
+def _checked(type_name: str, handler: Handler) -> ServiceHandler:
     """``handler`` behind a check of the request against ``type_name``'s fields."""
     fields = dict(typedefs.request_fields(type_name))
 
-    def call(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+    def call(args: Mapping[str, Any], session: Session) -> Mapping[str, Any] | ViaGraph:
         request = {name: "" for name in fields}
         for key, value in args.items():
             if key not in fields:
@@ -243,16 +248,55 @@ def _type_handlers(bridge: Bridge) -> dict[str, Handler]:
     }
 
 
-def _param_handlers(params: RobotParameters) -> dict[str, Handler]:
+def _param_handlers(params: RobotParameters,
+                    graph_nodes: Callable[[], Collection[str]]) -> dict[str, Handler]:
+    """Rosapi's parameter services: the robot's here, a graph node's through its services."""
     def outcome(reason: str = "") -> dict[str, Any]:
         return {"successful": not reason, "reason": shorten(reason)}
+
+    def graph_node(name: str) -> tuple[str, str] | None:
+        """(node, param) when ``name`` is a parameter of another node on the graph."""
+        try:
+            node, param = _param_name(name)
+        except ValueError:
+            return None
+        return (node, param) if node != NODE_NAME and node in graph_nodes() else None
+
+    def get_graph_param(node: str, param: str) -> ViaGraph:
+        def response(ok: bool, values: Any) -> Mapping[str, Any]:
+            try:
+                if not ok:
+                    raise ConfigError(str(values))
+                value = value_from_parameter_value((values.get("values") or [None])[0])
+            except (ConfigError, AttributeError) as error:
+                return {"value": json.dumps(""), **outcome(f"{node}: {error}")}
+            if value is None:
+                return {"value": json.dumps(""),
+                        **outcome(f"parameter {param} not found on {node}")}
+            return {"value": json.dumps(value), **outcome()}
+        return ViaGraph(f"{node}/get_parameters", {"names": [param]}, response)
+
+    def set_graph_param(node: str, param: str, value: Any) -> ViaGraph:
+        def response(ok: bool, values: Any) -> Mapping[str, Any]:
+            if not ok:
+                return outcome(f"{node}: {values}")
+            results = values.get("results") or [{}] if isinstance(values, Mapping) else [{}]
+            result = results[0] if isinstance(results[0], Mapping) else {}
+            return outcome("" if result.get("successful") else
+                           f"{node}: {result.get('reason') or 'refused'}")
+        return ViaGraph(f"{node}/set_parameters",
+                        {"parameters": [{"name": param, "value": parameter_value_msg(value)}]},
+                        response)
 
     def robot_param(name: str) -> str | None:
         """The robot parameter ``name`` names; None for another node's or a missing one."""
         node, param = _param_name(name)
         return param if node == NODE_NAME and param in params.names() else None
 
-    def get_param(args: dict[str, str], session: Session) -> Mapping[str, Any]:
+    def get_param(args: dict[str, str], session: Session) -> Mapping[str, Any] | ViaGraph:
+        other = graph_node(args["name"])
+        if other is not None:
+            return get_graph_param(*other)
         try:
             param = robot_param(args["name"])
         except ValueError as error:
@@ -269,9 +313,12 @@ def _param_handlers(params: RobotParameters) -> dict[str, Handler]:
                 **outcome(f"parameter {shorten_value(args['name'])} not found; "
                           f"{NODE_NAME} has {', '.join(params.names())}")}
 
-    def set_param(args: dict[str, str], session: Session) -> Mapping[str, Any]:
+    def set_param(args: dict[str, str], session: Session) -> Mapping[str, Any] | ViaGraph:
         try:
             require_admin(session, "set_param")
+            other = graph_node(args["name"])
+            if other is not None:
+                return set_graph_param(*other, parse_json(args["value"]))
             param = robot_param(args["name"])
             if param is None:
                 raise ValueError(f"parameter {shorten_value(args['name'])} not found; "

@@ -27,8 +27,27 @@ log = logging.getLogger("websim.bridge")
 SERVICE_TIMEOUT_S = 5.0
 """How long a call to a client-provided service may wait for its answer."""
 
-ServiceHandler = Callable[[Mapping[str, Any], Session], Mapping[str, Any]]
-"""An in-process service: (args, caller) -> response values; raises ``ServiceError``."""
+@dataclass(frozen=True)
+class ViaGraph:
+    """An in-process service's answer that a service on the ROS graph gives (``--ros``).
+
+    rosapi asks a graph node's own parameter services, as rosapi does on ROS 2.
+
+    Attributes:
+        service: the graph service to call.
+        args: its request.
+        response: makes the response values from the graph's outcome
+            (``ok``, values or the reason).
+    """
+
+    service: str
+    args: Mapping[str, Any]
+    response: Callable[[bool, Any], Mapping[str, Any]]
+
+
+ServiceHandler = Callable[[Mapping[str, Any], Session], "Mapping[str, Any] | ViaGraph"]
+"""An in-process service: (args, caller) -> response values (or ``ViaGraph``); raises
+``ServiceError``."""
 
 
 Answer = Callable[[bool, Any], None]
@@ -164,11 +183,17 @@ class Services:
             log.warning("client %s: %s failed: %s", session.peer, service, reason)
             self.fail(session, call_id, service, reason)
             return
-        response: dict[str, Any] = {"op": "service_response", "service": service,
-                                    "values": dict(values), "result": True}
-        if call_id is not None:
-            response["id"] = call_id
-        session.reply(response)
+        answer = self._answer_for(session, call_id, service)
+        if isinstance(values, ViaGraph):
+            via = values
+
+            def through(ok: bool, got: Any) -> None:
+                answer(True, via.response(ok, got))
+
+            if not self._bridge.graph.call_service(via.service, dict(via.args), through):
+                through(False, f"Service {via.service} does not exist")
+            return
+        answer(True, dict(values))
 
     def _forward(self, caller: Session | None, service: str, args: Any,
                  answer: Answer) -> None:
