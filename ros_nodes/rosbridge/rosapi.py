@@ -315,10 +315,10 @@ def _param_handlers(params: RobotParameters,
 
     def set_param(args: dict[str, str], session: Session) -> Mapping[str, Any] | ViaGraph:
         try:
-            require_admin(session, "set_param")
             other = graph_node(args["name"])
-            if other is not None:
+            if other is not None:  # its own set_parameters service: callable by anyone
                 return set_graph_param(*other, parse_json(args["value"]))
+            require_admin(session, "set_param")
             param = robot_param(args["name"])
             if param is None:
                 raise ValueError(f"parameter {shorten_value(args['name'])} not found; "
