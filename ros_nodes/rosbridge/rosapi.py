@@ -263,7 +263,8 @@ def _param_handlers(params: RobotParameters,
         return (node, param) if node != NODE_NAME and node in graph_nodes() else None
 
     def get_graph_param(node: str, param: str) -> ViaGraph:
-        def response(ok: bool, values: Any) -> Mapping[str, Any]:
+        def response(outcomes: list[tuple[bool, Any]]) -> Mapping[str, Any]:
+            ok, values = outcomes[0]
             try:
                 if not ok:
                     raise ConfigError(str(values))
@@ -274,19 +275,37 @@ def _param_handlers(params: RobotParameters,
                 return {"value": json.dumps(""),
                         **outcome(f"parameter {param} not found on {node}")}
             return {"value": json.dumps(value), **outcome()}
-        return ViaGraph(f"{node}/get_parameters", {"names": [param]}, response)
+        return ViaGraph(((f"{node}/get_parameters", {"names": [param]}),), response)
 
     def set_graph_param(node: str, param: str, value: Any) -> ViaGraph:
-        def response(ok: bool, values: Any) -> Mapping[str, Any]:
+        def response(outcomes: list[tuple[bool, Any]]) -> Mapping[str, Any]:
+            ok, values = outcomes[0]
             if not ok:
                 return outcome(f"{node}: {values}")
             results = values.get("results") or [{}] if isinstance(values, Mapping) else [{}]
             result = results[0] if isinstance(results[0], Mapping) else {}
             return outcome("" if result.get("successful") else
                            f"{node}: {result.get('reason') or 'refused'}")
-        return ViaGraph(f"{node}/set_parameters",
-                        {"parameters": [{"name": param, "value": parameter_value_msg(value)}]},
-                        response)
+        request = {"parameters": [{"name": param, "value": parameter_value_msg(value)}]}
+        return ViaGraph(((f"{node}/set_parameters", request),), response)
+
+    def param_names(args: dict[str, str], session: Session) -> Mapping[str, Any] | ViaGraph:
+        """The robot's, then (``--ros``) every graph node's, from its list_parameters."""
+        robot_names = [f"{NODE_NAME}:{name}" for name in params.names()]
+        others = sorted(node for node in graph_nodes() if node != NODE_NAME)
+        if not others:
+            return {"names": robot_names}
+
+        def response(outcomes: list[tuple[bool, Any]]) -> Mapping[str, Any]:
+            names = list(robot_names)
+            for node, (ok, values) in zip(others, outcomes, strict=True):
+                listed = values.get("result", {}).get("names", []) \
+                    if ok and isinstance(values, Mapping) else []
+                names.extend(f"{node}:{name}" for name in listed if isinstance(name, str))
+            return {"names": names}
+
+        return ViaGraph(tuple((f"{node}/list_parameters", {"prefixes": [], "depth": 0})
+                              for node in others), response)
 
     def robot_param(name: str) -> str | None:
         """The robot parameter ``name`` names; None for another node's or a missing one."""
@@ -350,8 +369,7 @@ def _param_handlers(params: RobotParameters,
                        "cannot be deleted (undeclared), only set")
 
     return {
-        "get_param_names": lambda args, session: {
-            "names": [f"{NODE_NAME}:{name}" for name in params.names()]},
+        "get_param_names": param_names,
         "get_param": get_param, "set_param": set_param, "has_param": has_param,
         "delete_param": delete_param,
     }

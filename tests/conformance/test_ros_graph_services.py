@@ -111,3 +111,7 @@ def test_rosapi_gets_and_sets_a_graph_nodes_parameter_through_its_own_services(
     graph.spin_until(lambda: done, CALL_TIMEOUT_S, "set_param's answer")
     assert graph.node.get_parameter("gain").value == 4.0
     assert got(ros_client) == 4.0
+    names: list[Any] = []  # this node answers list_parameters only while it spins
+    ros_client.get_params(lambda answer: names.extend(answer["names"]))
+    graph.spin_until(lambda: names, CALL_TIMEOUT_S, "get_param_names' answer")
+    assert name in names and "/virtual_robot:mass_kg" in names

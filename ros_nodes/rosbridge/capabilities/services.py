@@ -27,22 +27,23 @@ log = logging.getLogger("websim.bridge")
 SERVICE_TIMEOUT_S = 5.0
 """How long a call to a client-provided service may wait for its answer."""
 
+Outcome = tuple[bool, Any]
+"""A graph service's outcome: (ok, response values or the reason)."""
+
+
 @dataclass(frozen=True)
 class ViaGraph:
-    """An in-process service's answer that a service on the ROS graph gives (``--ros``).
+    """An in-process service's answer that services on the ROS graph give (``--ros``).
 
-    rosapi asks a graph node's own parameter services, as rosapi does on ROS 2.
+    rosapi asks graph nodes' own parameter services, as rosapi does on ROS 2.
 
     Attributes:
-        service: the graph service to call.
-        args: its request.
-        response: makes the response values from the graph's outcome
-            (``ok``, values or the reason).
+        calls: the graph services to call, each with its request (in parallel).
+        response: makes the response values from their outcomes, in ``calls`` order.
     """
 
-    service: str
-    args: Mapping[str, Any]
-    response: Callable[[bool, Any], Mapping[str, Any]]
+    calls: tuple[tuple[str, Mapping[str, Any]], ...]
+    response: Callable[[list[Outcome]], Mapping[str, Any]]
 
 
 ServiceHandler = Callable[[Mapping[str, Any], Session], "Mapping[str, Any] | ViaGraph"]
@@ -185,15 +186,29 @@ class Services:
             return
         answer = self._answer_for(session, call_id, service)
         if isinstance(values, ViaGraph):
-            via = values
-
-            def through(ok: bool, got: Any) -> None:
-                answer(True, via.response(ok, got))
-
-            if not self._bridge.graph.call_service(via.service, dict(via.args), through):
-                through(False, f"Service {via.service} does not exist")
+            self._via_graph(values, lambda response: answer(True, response))
             return
         answer(True, dict(values))
+
+    def _via_graph(self, via: ViaGraph, done: Callable[[Mapping[str, Any]], None]) -> None:
+        """Call ``via``'s graph services; ``done`` gets the response once all answered."""
+        outcomes: list[Outcome | None] = [None] * len(via.calls)
+        waiting = [len(via.calls)]
+
+        def answered(index: int, ok: bool, got: Any) -> None:
+            outcomes[index] = (ok, got)
+            waiting[0] -= 1
+            if waiting[0] == 0:
+                done(via.response([outcome for outcome in outcomes if outcome is not None]))
+
+        if not via.calls:
+            done(via.response([]))
+        for index, (service, args) in enumerate(via.calls):
+            def answer(ok: bool, got: Any, index: int = index) -> None:
+                answered(index, ok, got)
+
+            if not self._bridge.graph.call_service(service, dict(args), answer):
+                answer(False, f"Service {service} does not exist")
 
     def _forward(self, caller: Session | None, service: str, args: Any,
                  answer: Answer) -> None:
