@@ -26,6 +26,7 @@ import base64
 import binascii
 import functools
 import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -42,6 +43,9 @@ INTERFACES_DIR = Path(__file__).with_name("interfaces")
 ``.msg`` reader falls short: ``wstring``), the ROS 2 interface text."""
 
 TYPESTORE = Stores.ROS2_HUMBLE
+
+SRV_SEPARATOR = re.compile(r"^---[ \t]*$", re.MULTILINE)
+"""The line between a ``.srv`` file's request and response."""
 
 INTEGER_RANGES = {
     "bool": None, "byte": (0, 255), "char": (0, 255), "octet": (0, 255),
@@ -67,6 +71,10 @@ ROS1_HEADER_FIELDS = frozenset({"seq"})
 """Fields of ROS 1's ``Header`` that ROS 2's lacks; dropped (roslibpy's ``Header`` writes
 ``seq``, null or a counter)."""
 
+EMPTY_PLACEHOLDER = "structure_needs_at_least_one_member"
+"""The field ROS 2's IDL gives a message with none (``std_msgs/Empty``); rclpy shows no field
+and rosbridge sends ``{}``, so websim's canonical form leaves it out too."""
+
 FAST_SEQUENCE_MIN = 32
 """Numeric sequences longer than this are checked as a whole (``numbers``), not per item."""
 
@@ -87,13 +95,26 @@ def _fielddefs() -> Mapping[str, Any]:
 
 
 def shipped_definitions(folder: Path = INTERFACES_DIR) -> dict[str, Any]:
-    """The definitions of ``folder``'s ``<package>/msg/<Type>.msg`` and ``.idl`` files."""
+    """The definitions of ``folder``'s ``<package>/msg/<Type>.msg`` and ``.idl`` files.
+
+    A ``<package>/srv/<Type>.srv`` gives two messages, ``<package>/srv/<Type>_Request`` and
+    ``_Response`` (ROS 2's names for a service's parts), so client-provided services of the
+    common types are checked as rosbridge fills them.
+    """
     types: dict[str, Any] = {}
     for path in sorted(folder.glob("*/msg/*.msg")):
         name = f"{path.parent.parent.name}/msg/{path.stem}"
         types.update(get_types_from_msg(path.read_text(encoding="utf-8"), name))
     for path in sorted(folder.glob("*/msg/*.idl")):
         types.update(get_types_from_idl(path.read_text(encoding="utf-8")))
+    for path in sorted(folder.glob("*/srv/*.srv")):
+        name = f"{path.parent.parent.name}/srv/{path.stem}"
+        request, response = SRV_SEPARATOR.split(path.read_text(encoding="utf-8"), maxsplit=1)
+        for part, text in (("Request", request), ("Response", response)):
+            parsed = get_types_from_msg(text.strip(), f"{name}_{part}")
+            # rosbags names it pkg/srv/msg/Type_Part; ROS 2 (and rclpy) pkg/srv/Type_Part
+            types.update({key.replace("/srv/msg/", "/srv/"): value
+                          for key, value in parsed.items()})
     return types
 
 
@@ -213,7 +234,8 @@ def _message(type_name: str, msg: Any, where: str, depth: int) -> dict[str, Any]
     if not isinstance(msg, Mapping):
         raise MessageError(f"{prefix}expected an object ({type_name}), got "
                            f"{type(msg).__name__}")
-    definition = _fielddefs()[type_name][1]
+    definition = [(name, kind) for name, kind in _fielddefs()[type_name][1]
+                  if name != EMPTY_PLACEHOLDER]
     names = {name for name, _ in definition}
     msg = from_ros1(type_name, msg)
     for key in msg:

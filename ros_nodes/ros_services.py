@@ -24,6 +24,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import rclpy.task
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import Executor
 from rclpy.node import Node
 
@@ -157,7 +158,10 @@ class GraphServices:
                 return response
 
         self.withdraw(service)
-        self._offered[service] = self._node.create_service(cls, service, handle)
+        # Reentrant, as rosbridge's: a second request is taken while the first waits for its
+        # provider (a mutually exclusive group would queue it behind the first's answer).
+        self._offered[service] = self._node.create_service(
+            cls, service, handle, callback_group=ReentrantCallbackGroup())
 
     def withdraw(self, service: str) -> None:
         """Stop offering a client's service on the graph."""

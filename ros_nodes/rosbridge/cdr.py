@@ -18,6 +18,7 @@ from rosbags.interfaces import Nodetype
 from rosbags.typesys import get_typestore
 
 from ros_nodes import message_types
+from ros_nodes.message_types import EMPTY_PLACEHOLDER
 
 NUMPY_TYPES = {
     "bool": np.bool_, "byte": np.uint8, "char": np.uint8, "octet": np.uint8,
@@ -64,7 +65,7 @@ def to_cdr(type_name: str, msg: Any) -> bytes:
 
 def _build(store: Any, type_name: str, msg: Any) -> Any:
     """The typestore's message object of ``type_name`` holding ``msg``'s values."""
-    values = {name: _value(store, kind, detail, msg[name])
+    values = {name: _value(store, kind, detail, msg[name]) if name != EMPTY_PLACEHOLDER else 0
               for name, (kind, detail) in store.fielddefs[type_name][1]}
     return store.types[type_name](**values)
 

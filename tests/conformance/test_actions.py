@@ -482,3 +482,13 @@ def test_serve_ros_a_client_provided_action_serves_rclpy_goals_on_the_graph(
     assert result.result().status == GoalStatus.SUCCEEDED
     assert list(result.result().result.sequence) == fibonacci(4)
     assert_feedback_in_order(feedback, order=4)
+
+
+def test_the_server_gets_the_action_type_as_it_advertised_it(raw: Any) -> None:
+    """rosbridge echoes the server's own spelling (``pkg/Type``), not a normalised one."""
+    provider, sender = raw(), raw()
+    provider.send(op="advertise_action", action="/spelled", type="example_interfaces/Fibonacci")
+    time.sleep(0.1)
+    sender.send(op="send_action_goal", id="s", action="/spelled", action_type=FIBONACCI,
+                args={"order": 1})
+    assert provider.next("send_action_goal")["action_type"] == "example_interfaces/Fibonacci"

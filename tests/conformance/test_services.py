@@ -89,3 +89,21 @@ def test_unadvertising_mid_call_fails_the_caller_at_once(
         waited_s = time.monotonic() - started
     assert "unadvertised" in str(answer.get("error")), answer
     assert waited_s < SERVICE_TIMEOUT_S, "failed by the unadvertise, not by the timeout"
+
+
+def test_a_request_that_does_not_fit_the_service_type_fails_before_the_provider_sees_it(
+        server: ServerProcess) -> None:
+    """rosbridge fills the ROS request from the args: a float for SetBool's bool fails."""
+    with ws_client.connect(server.ws_url) as provider, \
+            ws_client.connect(server.ws_url) as caller:
+        provider.send(json.dumps({"op": "advertise_service", "service": "/typed_setbool",
+                                  "type": "std_srvs/SetBool"}))
+        time.sleep(0.1)
+        caller.send(json.dumps({"op": "call_service", "service": "/typed_setbool",
+                                "id": "bad", "args": {"data": 42.0}}))
+        answer = json.loads(caller.recv(timeout=5))
+        assert answer["result"] is False and "data: expected true or false" in answer["values"]
+        caller.send(json.dumps({"op": "call_service", "service": "/typed_setbool",
+                                "id": "empty", "args": {}}))
+        request = json.loads(provider.recv(timeout=5))
+    assert request["args"] == {"data": False}, "the first call never reached the provider"

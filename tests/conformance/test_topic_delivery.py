@@ -104,3 +104,34 @@ def test_a_publish_without_advertise_takes_the_topics_known_type(
         relayed = json.loads(listener.recv(timeout=5))
     assert relayed["topic"] == "/inferred"
     assert relayed["msg"] == {"data": ""}, "filled as the String it is known to be"
+
+
+def test_an_advertise_with_latch_true_latches_every_publish(ros: roslibpy.Ros,
+                                                            server: ServerProcess) -> None:
+    talker = roslibpy.Topic(ros, "/latched_by_advertise", "std_msgs/msg/String", latch=True)
+    talker.advertise()
+    talker.publish(roslibpy.Message({"data": "kept"}))  # roslibpy sends latch on advertise
+    ros.get_topics()
+    late = roslibpy.Ros(host="127.0.0.1", port=server.ws_port)
+    late.run(timeout=10)
+    try:
+        messages = heard(late, "/latched_by_advertise")
+        wait_for(lambda: messages, 5.0, "the latched message")
+    finally:
+        late.close()
+    assert messages == ["kept"]
+
+
+def test_a_publish_without_advertise_takes_the_type_a_subscriber_named(
+        server: ServerProcess) -> None:
+    import websockets.sync.client as ws_client
+
+    with ws_client.connect(server.ws_url) as listener, \
+            ws_client.connect(server.ws_url) as publisher:
+        listener.send(json.dumps({"op": "subscribe", "topic": "/typed_by_subscriber",
+                                  "type": "std_msgs/String"}))
+        time.sleep(0.1)
+        publisher.send(json.dumps({"op": "publish", "topic": "/typed_by_subscriber",
+                                   "msg": {"data": "inferred"}}))
+        relayed = json.loads(listener.recv(timeout=5))
+    assert relayed["msg"] == {"data": "inferred"}

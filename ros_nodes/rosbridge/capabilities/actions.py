@@ -148,6 +148,8 @@ class Actions:
 
     def __init__(self, bridge: Bridge) -> None:
         self._bridge = bridge
+        self._spelled: dict[str, str] = {}
+        """Each served action's type as its server spelled it: goals echo it (rosbridge)."""
         self._graph: ActionGraph | None = None
         self._servers: dict[str, tuple[Session, str]] = {}
         self._offered: set[str] = set()
@@ -231,7 +233,8 @@ class Actions:
                               "already, the most one action may hold")
         key = self._register(_Goal(sender, owner, owner_id, action, server))
         server.reply({"op": "send_action_goal", "id": key, "action": action,
-                      "action_type": server_type, "args": args, "feedback": True})
+                      "action_type": self._spelled.get(action, server_type), "args": args,
+                      "feedback": True})
         return key
 
     def _cancel_goal(self, session: Session, message: dict[str, Any]) -> None:
@@ -309,6 +312,7 @@ class Actions:
         if server is not None and server[1] != type_name:
             self._withdraw(session, action, f"{action} was advertised again as {type_name}")
         self._servers[action] = (session, type_name)
+        self._spelled[action] = message["type"]
         session.actions[action] = type_name
         self._offer(session, action, type_name)
 
@@ -332,6 +336,7 @@ class Actions:
     def _withdraw(self, session: Session, action: str, reason: str) -> None:
         session.actions.pop(action, None)
         self._servers.pop(action, None)
+        self._spelled.pop(action, None)
         for key, goal in list(self._goals.items()):
             if goal.server is session and goal.action == action:
                 self._finish(key, reason, GoalStatus.ABORTED, False)

@@ -69,6 +69,23 @@ class _PendingCall:
     answer: Answer
 
 
+def request_args(service_type: str, args: Any) -> Any:
+    """A caller's request in canonical form, where the service type is known.
+
+    rosbridge fills the ROS request from the args before any provider sees them: a field the
+    type lacks or a value of the wrong type fails the call, missing fields take defaults.
+
+    Raises:
+        ConfigError: the args do not fit the request type.
+    """
+    request_type = f"{service_type}_Request"
+    if not message_types.known(request_type):
+        return args
+    if args in ([], None):  # roslibpy and roslibjs send [] for an empty request
+        args = {}
+    return message_types.canonical(request_type, args)
+
+
 def response_values(service_type: str | None, values: Any) -> Any:
     """A provider's response values in canonical form, where the service type is known.
 
@@ -162,6 +179,11 @@ class Services:
         service, call_id = message["service"], message.get("id")
         args = message.get("args", {})
         if service in self._providers:
+            try:
+                args = request_args(self._providers[service][1], args)
+            except ConfigError as error:
+                self.fail(session, call_id, service, f"{service}: {shorten(str(error))}")
+                return
             self._forward(session, service, args, self._answer_for(session, call_id, service))
             return
         if service not in self._local:

@@ -120,6 +120,11 @@ class Topics:
         self._subscribers: dict[str, set[Session]] = {}
         self._local: dict[str, list[LocalSubscriber]] = {}
         self._latched: dict[str, Encoded] = {}
+        self._subscribed_types: dict[str, str] = {}
+        """Types named by subscriptions to topics of no other known type (rosbridge infers
+        a publisher's type from them); dropped with the last subscriber."""
+        self._latching: set[tuple[Session, str]] = set()
+        """(client, topic) advertised with ``latch: true``: its every publish is latched."""
         self._published_s: dict[Session, float] = {}
         """When each client last published (monotonic s): the fan-out serves them first."""
         message_types.load()  # now, not at the first publish (it takes ~0.1 s)
@@ -211,6 +216,8 @@ class Topics:
             raise BridgeError(f"advertise {topic}: {error}") from None
         self._types[topic] = type_name
         session.advertised.setdefault(topic, {})[message.get("id")] = type_name
+        if message.get("latch"):
+            self._latching.add((session, topic))
         self._bridge.graph.advertise(session, topic, type_name)
 
     def _unadvertise(self, session: Session, message: dict[str, Any]) -> None:
@@ -225,6 +232,7 @@ class Topics:
     def _drop_advertisement(self, session: Session, topic: str) -> None:
         if session.advertised.pop(topic, None) is None:
             return
+        self._latching.discard((session, topic))
         still_used = topic in self._owned or topic in self._local or any(
             topic in other.advertised for other in self._bridge.sessions)
         if not still_used:
@@ -249,7 +257,7 @@ class Topics:
         except ConfigError as error:
             raise BridgeError(f"publish to {topic}: {error}") from None
         size = session.frame_bytes  # what arrived: known before anything is encoded
-        latch = bool(message.get("latch"))
+        latch = bool(message.get("latch")) or (session, topic) in self._latching
         if latch and size > session.limits.max_latched_bytes:
             raise BridgeError(f"publish to {topic}: a latched message may be at most "
                               f"{session.limits.max_latched_bytes} bytes, this one is {size}")
@@ -275,10 +283,14 @@ class Topics:
         Known from the simulator, another client's advertisement or subscription, or the
         ROS graph.
         """
-        known = self._types.get(topic)
+        known = self._type_of(topic)
         if known is None:
             known = self._bridge.graph.topic_types().get(topic)
         return known
+
+    def _type_of(self, topic: str) -> str | None:
+        """The type ``topic`` is known to carry here (not asking the graph)."""
+        return self._types.get(topic) or self._subscribed_types.get(topic)
 
     def _deliver(self, messages: list[Encoded], now_s: float | None = None) -> None:
         """Queue ``messages`` (one tick's, or one client's publish) for their subscribers.
@@ -324,7 +336,7 @@ class Topics:
         subscription.last_sent_s = now
         try:
             frame = encoded.frame(subscription.compression, session.fragment_size,
-                                  self._types.get(topic))
+                                  self._type_of(topic))
         except (TypeError, ValueError) as error:  # a message no encoder can write
             self._bridge.faults.record(f"encoding {topic}", error)
             return False
@@ -348,10 +360,11 @@ class Topics:
 
     def _subscribe(self, session: Session, message: dict[str, Any]) -> None:
         topic = message["topic"]
+        named_type = None
         if message.get("type"):
             try:
-                message_types.check_type(self._known_type(topic, message["type"]),
-                                         graph=self._bridge.graph.attached)
+                named_type = self._known_type(topic, message["type"])
+                message_types.check_type(named_type, graph=self._bridge.graph.attached)
             except ConfigError as error:
                 raise BridgeError(f"subscribe {topic}: {error}") from None
         limits = session.limits
@@ -369,6 +382,8 @@ class Topics:
         if subscription is None:
             subscription = session.subscriptions[topic] = Subscription()
         subscription.add(sub_id, throttle_ms, queue_length, compression)
+        if named_type is not None and topic not in self._types:
+            self._subscribed_types.setdefault(topic, named_type)
         self._subscribers.setdefault(topic, set()).add(session)
         self._bridge.graph.subscribe(session, topic, message.get("type") or
                                      self._types.get(topic))
@@ -376,12 +391,12 @@ class Topics:
         if latched is not None:
             _, length = subscription.effective()
             frames = latched.frame(subscription.compression, session.fragment_size,
-                                   self._types.get(topic))
+                                   self._type_of(topic))
             session.outbox.put_topic(topic, frames, length)
 
     def _check_cdr(self, topic: str) -> None:
         """Refuse ``cbor-raw`` on a topic whose known type cannot be serialized as CDR."""
-        type_name = self._types.get(topic)
+        type_name = self._type_of(topic)
         if type_name is not None and not cdr.serializable(type_name):
             raise BridgeError(f"subscribe {topic}: cbor-raw needs the message's CDR bytes, "
                               f"and {type_name} is not a type websim can serialize; "
@@ -405,4 +420,5 @@ class Topics:
             subscribers.discard(session)
             if not subscribers:
                 del self._subscribers[topic]
+                self._subscribed_types.pop(topic, None)
                 self._bridge.graph.unsubscribe(topic)
