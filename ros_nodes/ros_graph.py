@@ -328,7 +328,7 @@ class GraphRelay:
                 continue  # it left between the two questions
         return found
 
-    def call_service(self, service: str, type_name: str, args: Mapping[str, Any],
+    def call_service(self, service: str, type_name: str | None, args: Mapping[str, Any],
                      answer: Answer) -> None:
         """Call a graph service; ``answer(ok, values_or_reason)`` on the loop."""
         if self.services is None:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import threading
 from collections import OrderedDict
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -39,6 +40,11 @@ DISCOVERY_S = 2.0
 first call of a service; discovery takes tens of milliseconds)."""
 
 RETRY_S = 0.02
+DISCOVERY_RETRY_S = 0.1
+"""How often a service not on the graph yet is looked up again (one graph query each)."""
+RETIRE_GRACE_S = 0.5
+"""How long a withdrawn server outlives its last answer (the executor sends it after the
+handler returns)."""
 CALL_TIMEOUT_S = 5.0
 """How long a call to a graph service may take (as a call to a client-provided one)."""
 MAX_CLIENTS = 64
@@ -66,7 +72,7 @@ class GraphServices:
         self._executor = executor
         self._loop = loop
         self._clients: OrderedDict[tuple[str, str], Any] = OrderedDict()
-        self._offered: dict[str, Any] = {}
+        self._offered: dict[str, _Offer] = {}
 
     def service_types(self) -> dict[str, str]:
         """Services on the graph, each with its first type (``pkg/srv/Type``)."""
@@ -75,13 +81,20 @@ class GraphServices:
 
     # ---- calls to the graph ---------------------------------------------------------------
 
-    def call(self, service: str, type_name: str, args: Mapping[str, Any],
+    def call(self, service: str, type_name: str | None, args: Mapping[str, Any],
              answer: Answer) -> None:
         """Call ``service`` on the graph; ``answer`` gets the outcome on the loop.
+
+        ``type_name`` None: the service is not on the graph (yet); its type is looked up
+        again until ``DISCOVERY_S`` (a node just started), then the call fails as rosbridge
+        fails it ("Service ... does not exist").
 
         Raises:
             BridgeError: the type is not installed or the request does not fit it.
         """
+        if type_name is None:
+            self._when_discovered(service, args, answer, self._loop.time() + DISCOVERY_S)
+            return
         try:
             cls = message_class(type_name)
             request = to_message(cls.Request, args)
@@ -114,6 +127,20 @@ class GraphServices:
 
         attempt()
 
+    def _when_discovered(self, service: str, args: Mapping[str, Any], answer: Answer,
+                         deadline_s: float) -> None:
+        type_name = self.service_types().get(service)
+        if type_name is not None:
+            try:
+                self.call(service, type_name, args, answer)
+            except BridgeError as error:
+                answer(False, str(error))
+        elif self._loop.time() < deadline_s:
+            self._loop.call_later(DISCOVERY_RETRY_S, self._when_discovered, service, args,
+                                  answer, deadline_s)
+        else:
+            answer(False, f"Service {service} does not exist")
+
     def _client(self, service: str, type_name: str, cls: Any) -> Any:
         key = (service, type_name)
         client = self._clients.get(key)
@@ -139,13 +166,19 @@ class GraphServices:
         except MessageConversionError as error:
             raise BridgeError(f"{service}: {error}") from None
         executor, post = self._executor, self._post
+        offer = _Offer()
 
         async def handle(request: Any, response: Any) -> Any:
             outcome: rclpy.task.Future[tuple[bool, Any]] = rclpy.task.Future(executor=executor)
             outcome.add_done_callback(lambda _: None)  # completing it wakes the executor
             args = to_dict(request)
-            post(lambda: forward(args, lambda ok, values: outcome.set_result((ok, values))))
-            answered = await outcome
+            offer.begin()
+            try:
+                post(lambda: forward(args, lambda ok, values: outcome.set_result((ok, values))))
+                answered = await outcome
+            finally:
+                if offer.end():  # withdrawn meanwhile: destroyed once this answer is out
+                    post(lambda: self._destroy_later(offer))
             ok, values = answered if answered is not None else (False, "no answer")
             if not ok:
                 log.warning("%s: a ROS caller gets the default response: %s", service, values)
@@ -160,14 +193,28 @@ class GraphServices:
         self.withdraw(service)
         # Reentrant, as rosbridge's: a second request is taken while the first waits for its
         # provider (a mutually exclusive group would queue it behind the first's answer).
-        self._offered[service] = self._node.create_service(
+        offer.server = self._node.create_service(
             cls, service, handle, callback_group=ReentrantCallbackGroup())
+        self._offered[service] = offer
 
     def withdraw(self, service: str) -> None:
-        """Stop offering a client's service on the graph."""
-        server = self._offered.pop(service, None)
-        if server is not None:
-            self._node.destroy_service(server)
+        """Stop offering a client's service on the graph.
+
+        A server still answering (its provider just left: the callers get the default
+        response) is destroyed once the last answer is out; destroyed now, the callers would
+        wait for ever.
+        """
+        offer = self._offered.pop(service, None)
+        if offer is not None and offer.retire():
+            self._destroy(offer)
+
+    def _destroy_later(self, offer: _Offer) -> None:
+        self._loop.call_later(RETIRE_GRACE_S, self._destroy, offer)
+
+    def _destroy(self, offer: _Offer) -> None:
+        if offer.server is not None:
+            self._node.destroy_service(offer.server)
+            offer.server = None
 
     def offered(self) -> frozenset[str]:
         """The client-provided services offered on the graph."""
@@ -178,6 +225,35 @@ class GraphServices:
             self._loop.call_soon_threadsafe(fn)
         except RuntimeError:  # the loop closed while shutting down
             log.debug("event loop closed; dropped a service answer")
+
+
+class _Offer:
+    """One client-provided service on the graph: its rclpy server and requests in flight.
+
+    Counted from both threads (the executor's handlers, the loop's withdraw), under a lock.
+    """
+
+    def __init__(self) -> None:
+        self.server: Any = None
+        self._lock = threading.Lock()
+        self._in_flight = 0
+        self._retired = False
+
+    def begin(self) -> None:
+        with self._lock:
+            self._in_flight += 1
+
+    def end(self) -> bool:
+        """One request answered; whether the server is to be destroyed now."""
+        with self._lock:
+            self._in_flight -= 1
+            return self._retired and self._in_flight == 0
+
+    def retire(self) -> bool:
+        """Withdrawn; whether it can be destroyed at once (nothing in flight)."""
+        with self._lock:
+            self._retired = True
+            return self._in_flight == 0
 
 
 def _answered(future: Any, answer: Answer) -> None:

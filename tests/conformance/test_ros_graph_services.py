@@ -19,7 +19,7 @@ from std_msgs.msg import String  # noqa: E402
 from std_srvs.srv import SetBool  # noqa: E402
 
 from ros_fixtures import Graph  # noqa: E402
-from server_process import wait_for  # noqa: E402
+from server_process import ServerProcess, wait_for  # noqa: E402
 
 CALL_TIMEOUT_S = 15.0
 
@@ -115,3 +115,36 @@ def test_rosapi_gets_and_sets_a_graph_nodes_parameter_through_its_own_services(
     ros_client.get_params(lambda answer: names.extend(answer["names"]))
     graph.spin_until(lambda: names, CALL_TIMEOUT_S, "get_param_names' answer")
     assert name in names and "/virtual_robot:mass_kg" in names
+
+
+def test_a_provider_leaving_mid_call_answers_the_ros_caller_and_a_new_provider_takes_over(
+        graph: Graph, ros_server: ServerProcess) -> None:
+    """rosbridge's advertise_service_duplicate: the next client's service serves the graph."""
+    import json
+
+    import websockets.sync.client as ws_client
+
+    advertise = json.dumps({"op": "advertise_service", "type": "std_srvs/SetBool",
+                            "service": "/handed_over"})
+    client = graph.node.create_client(SetBool, "/handed_over")
+    with ws_client.connect(ros_server.ws_url) as first:
+        first.send(advertise)
+        graph.spin_until(client.service_is_ready, CALL_TIMEOUT_S, "the first provider")
+        pending = client.call_async(SetBool.Request(data=True))
+        assert json.loads(first.recv(timeout=CALL_TIMEOUT_S))["op"] == "call_service"
+    graph.spin_until(pending.done, CALL_TIMEOUT_S, "the ROS caller's answer after the "
+                     "provider left (the default response; ROS 2 services cannot fail)")
+    with ws_client.connect(ros_server.ws_url) as second:
+        second.send(advertise)
+        graph.spin_until(client.service_is_ready, CALL_TIMEOUT_S, "the second provider")
+
+        def reached_second() -> Any:
+            call = client.call_async(SetBool.Request(data=False))
+            try:
+                return json.loads(second.recv(timeout=1.0))
+            except TimeoutError:
+                client.remove_pending_request(call)
+                return None
+
+        request = graph.spin_until(reached_second, CALL_TIMEOUT_S, "a call at the second")
+    assert request["op"] == "call_service" and request["args"] == {"data": False}

@@ -50,9 +50,12 @@ class Graph(Protocol):
     def nodes(self) -> Mapping[str, tuple[list[str], list[str], list[str]]]:
         """Each node on the graph (full name): (topics it publishes, subscribes, services)."""
 
-    def call_service(self, service: str, type_name: str, args: Mapping[str, Any],
+    def call_service(self, service: str, type_name: str | None, args: Mapping[str, Any],
                      answer: Callable[[bool, Any], None]) -> None:
-        """Call a graph service; ``answer(ok, values_or_reason)`` later, on this thread."""
+        """Call a graph service; ``answer(ok, values_or_reason)`` later, on this thread.
+
+        ``type_name`` None: the graph does not show it yet; wait for it a moment.
+        """
 
     def offer_service(self, service: str, type_name: str,
                       forward: Callable[[Mapping[str, Any], Callable[[bool, Any], None]],
@@ -158,17 +161,18 @@ class GraphRelay:
 
     def call_service(self, service: str, args: Mapping[str, Any],
                      answer: Callable[[bool, Any], None]) -> bool:
-        """Call ``service`` on the graph if it is there; False: it is not (or no graph).
+        """Call ``service`` on the graph; False: there is no graph.
+
+        A service the graph does not show yet is waited for a moment (a node just started);
+        ``answer`` then says it does not exist, as rosbridge does.
 
         Raises:
             BridgeError: the request does not fit the service's type, or it is not installed.
         """
         if self._graph is None:
             return False
-        type_name = self._graph.service_types().get(service)
-        if type_name is None:
-            return False
-        self._graph.call_service(service, type_name, args, answer)
+        self._graph.call_service(service, self._graph.service_types().get(service), args,
+                                 answer)
         return True
 
     def offer_service(self, session: Session, service: str, type_name: str,
