@@ -76,7 +76,8 @@ def run_once(server_url: str, node: Any, publisher: Any, count: int) -> dict[str
     listener.join()
     arrived_s = time.perf_counter() - started - (IDLE_S if len(got) < count else 0.0)
     expected = [str(index) for index in range(count)]
-    missing = next((index for index, (a, b) in enumerate(zip(got, expected)) if a != b),
+    pairs = enumerate(zip(got, expected, strict=False))
+    missing = next((index for index, (a, b) in pairs if a != b),
                    len(got) if len(got) < count else None)
     return {"received": len(got), "complete_in_order": got == expected,
             "first_missing": missing, "published_ms": published_s * 1000,
