@@ -22,7 +22,10 @@ from typing import Any
 
 import rclpy.task
 from rclpy.action.client import ActionClient
-from rclpy.action.graph import get_action_names_and_types
+from rclpy.action.graph import (
+    get_action_names_and_types,
+    get_action_server_names_and_types_by_node,
+)
 from rclpy.action.server import ActionServer, CancelResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import Executor
@@ -106,6 +109,24 @@ class RosActions:
                 for name, types in get_action_names_and_types(self._node)
                 if types and name not in self._servers}
 
+    def _graph_servers(self) -> set[str]:
+        """Actions that another node's action server serves.
+
+        A client alone lists a name in ``action_types`` too: a node waiting for the server
+        it is about to get must not keep a client's action off the graph.
+        """
+        own = self._node.get_fully_qualified_name()
+        served: set[str] = set()
+        for name, namespace in self._node.get_node_names_and_namespaces():
+            if f"{namespace.rstrip('/')}/{name}" == own:
+                continue
+            try:
+                served.update(action for action, _ in get_action_server_names_and_types_by_node(
+                    self._node, name, namespace))
+            except Exception:  # the node left between the two questions
+                continue
+        return served
+
     # ---- goals to the graph's servers -----------------------------------------------------
 
     def send_goal(self, action: str, type_name: str, args: Any,
@@ -153,7 +174,7 @@ class RosActions:
         Raises:
             BridgeError: a node on the graph serves it already, or the type is missing.
         """
-        if action in self.action_types():
+        if action in self._graph_servers():
             raise BridgeError(f"{action} is served on the ROS graph already")
         cls = action_class(type_name)
 

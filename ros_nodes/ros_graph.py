@@ -35,6 +35,7 @@ from typing import Any, TypeVar
 
 import rclpy
 from rclpy.context import Context
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
@@ -74,6 +75,12 @@ while the executor thread catches up. rosbridge keeps 10, so a burst a ROS node 
 full speed (tens of thousands per second, faster than Python takes them) loses all but the
 last ten before any client could get them; with 1000, a burst of 1000 reaches a queue_length
 0 subscriber whole (benchmarks/ros_burst.py)."""
+
+RELAY_PUBLISHER_QOS = QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                                 lifespan=Duration(seconds=1))
+"""The relay's publishers, as rosbridge's: a node that subscribes (transient local) within a
+second of a client's message still gets it, as one that matched just after the publisher was
+made (the first publish creates it)."""
 
 T = TypeVar("T")
 
@@ -282,7 +289,7 @@ class GraphRelay:
             cls = message_class(type_name)
         except MessageConversionError as error:
             raise BridgeError(str(error)) from None
-        publisher = self._node.create_publisher(cls, topic, QoSProfile(depth=RELAY_DEPTH))
+        publisher = self._node.create_publisher(cls, topic, RELAY_PUBLISHER_QOS)
         self._publishers[topic] = (publisher, cls)
 
     def unadvertise(self, topic: str) -> None:

@@ -51,6 +51,13 @@ def test_readme_limits_table_states_the_defaults_in_force() -> None:
         "subscribe ids per topic per client": f"{limits.max_ids_per_topic}",
         "subscriptions / advertised topics / offered services per client":
             f"{limits.max_subscriptions} / {limits.max_advertised} / {limits.max_services}",
+        "offered actions per client": f"{limits.max_actions}",
+        "action goals pending per client / per offered action":
+            f"{limits.max_goals} / {limits.max_goals_per_action}",
+        "fragments of one incoming message": f"{limits.max_fragments}",
+        "fragmented messages incomplete at once per client":
+            f"{limits.max_partial_messages}; one that gets no fragment for "
+            f"{limits.fragment_timeout_s:g} s",
         "a message published with `latch: true`": f"{limits.max_latched_bytes >> 10} KiB",
         "bytes/s a client's publications are relayed to others":
             f"{limits.relay_bytes_per_s >> 10} KiB/s",
