@@ -47,12 +47,10 @@ def server():
 @pytest.fixture
 def ros(server: Any) -> Iterator[Any]:
     """roslibpy connected to the module's ``server``, closed after the test."""
-    import roslibpy
+    from server_process import roslibpy_client
 
-    client = roslibpy.Ros(host="127.0.0.1", port=server.ws_port)
-    client.run(timeout=10)
-    yield client
-    client.close()
+    with roslibpy_client(server) as client:
+        yield client
 
 
 @pytest.fixture(scope="module")

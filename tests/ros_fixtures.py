@@ -34,7 +34,13 @@ from rclpy.parameter import Parameter, parameter_value_to_python  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 
-from server_process import ServerProcess, start_server, stop_process, wait_for  # noqa: E402
+from server_process import (  # noqa: E402
+    ServerProcess,
+    roslibpy_client,
+    start_server,
+    stop_process,
+    wait_for,
+)
 
 WALL_X_M = 2.0
 """The test world's one wall: x = 2 m, so beam 0 (straight ahead at spawn) reads 2 m."""
@@ -204,9 +210,5 @@ def ros_server(domain: int, test_world: Path) -> Iterator[ServerProcess]:
 @pytest.fixture
 def ros_client(ros_server: ServerProcess) -> Iterator[Any]:
     """roslibpy connected to ``ros_server`` (a browser's or a student's script's view)."""
-    import roslibpy
-
-    client = roslibpy.Ros(host="127.0.0.1", port=ros_server.ws_port)
-    client.run(timeout=10)
-    yield client
-    client.close()
+    with roslibpy_client(ros_server) as client:
+        yield client

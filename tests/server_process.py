@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import os
@@ -11,7 +12,7 @@ import subprocess
 import sys
 import time
 import urllib.request
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -124,3 +125,16 @@ def start_server(extra_args: Sequence[str] = (), ws_port: int | None = None,
 
     wait_for(healthy, timeout_s=20.0, what="websim serve to become healthy")
     return server
+
+
+@contextlib.contextmanager
+def roslibpy_client(server: ServerProcess) -> Iterator[Any]:
+    """A roslibpy client connected to ``server``, closed (never terminated) at the end."""
+    import roslibpy
+
+    client = roslibpy.Ros(host="127.0.0.1", port=server.ws_port)
+    client.run(timeout=10)
+    try:
+        yield client
+    finally:
+        client.close()
