@@ -25,6 +25,7 @@ from test_web_interface import (
     LIBRARIES,
     Bridge,
     admin_context,
+    drag_up,
     driving_page,
     page_url,
     screenshot,
@@ -37,7 +38,7 @@ from test_web_interface import (
 )
 
 from chromium import skip_reason
-from server_process import ServerProcess, wait_for
+from server_process import ServerProcess
 
 BROWSER_SKIP = skip_reason(LIBRARIES)
 pytestmark = [pytest.mark.browser,
@@ -212,20 +213,10 @@ def test_sideways_the_joystick_beside_the_view_drives_without_scrolling(
         zone, = boxes(page, "#joystick")
         assert zone["x"] >= view["x"] + view["width"]  # beside the view, not under it
         x, y = zone["x"] + zone["width"] / 2, zone["y"] + zone["height"] / 2
-        cdp = page.context.new_cdp_session(page)
-
-        def finger(kind: str, points: list[dict[str, float]]) -> None:
-            cdp.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": points})
-
-        odoms_before = len(bridge.messages("/odom"))
-        finger("touchStart", [{"x": x, "y": y}])
-        for step in range(1, 11):  # straight up, past the rim
-            finger("touchMove", [{"x": x, "y": y - 8 * step}])
-        moving = wait_for(lambda: [m for m in bridge.messages("/odom")[odoms_before:]
-                                   if x_of(m) > 0.05], what="the joystick to drive the robot")[0]
+        moving, lift = drag_up(page, bridge, x, y)
         assert page.evaluate("window.scrollY") == 0  # the drag moved the robot, not the page
         screenshot(page, f"phone-joystick-{phone.name}.png", full_page=False)
-        finger("touchEnd", [])
+        lift()
         stopped = wait_until_still(bridge)
         assert twist_pairs(bridge.messages("/cmd_vel"))[-1] == (0.0, 0.0)
         assert log.console_errors == [] and log.page_errors == []

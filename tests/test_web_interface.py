@@ -29,7 +29,7 @@ import shutil
 import subprocess
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -142,6 +142,27 @@ def latest_odom(bridge: Bridge) -> dict[str, Any]:
 HISTORY_PLOTTED_S = 20.0
 """Seconds the live plots show (state.js HISTORY_S)."""
 
+
+
+def drag_up(page: Any, bridge: Bridge, x: float, y: float) -> tuple[dict[str, Any],
+                                                                 Callable[[], None]]:
+    """Put a finger on the joystick at (x, y) and drag it straight up past the rim.
+
+    Chrome's own touch events (DevTools protocol), as a phone sends them. Returns the first
+    /odom that moved forward and what lifts the finger.
+    """
+    touch = page.context.new_cdp_session(page)
+
+    def finger(kind: str, points: list[dict[str, float]]) -> None:
+        touch.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": points})
+
+    odoms_before = len(bridge.messages("/odom"))
+    finger("touchStart", [{"x": x, "y": y}])
+    for step in range(1, 11):
+        finger("touchMove", [{"x": x, "y": y - 8 * step}])
+    moving = wait_for(lambda: [m for m in bridge.messages("/odom")[odoms_before:]
+                               if x_of(m) > 0.05], what="the joystick to drive the robot")[0]
+    return moving, lambda: finger("touchEnd", [])
 
 def x_of(odom: dict[str, Any]) -> float:
     return float(odom["pose"]["pose"]["position"]["x"])
@@ -878,19 +899,9 @@ def test_phone_shows_the_joystick_and_dragging_it_drives(server: ServerProcess,
         zone.scroll_into_view_if_needed()
         box = zone.bounding_box()
         x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
-        touch = page.context.new_cdp_session(page)
-
-        def finger(kind: str, points: list[dict[str, float]]) -> None:
-            touch.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": points})
-
-        odoms_before = len(bridge.messages("/odom"))
-        finger("touchStart", [{"x": x, "y": y}])
-        for step in range(1, 11):  # drag straight up, to the rim
-            finger("touchMove", [{"x": x, "y": y - 8 * step}])
-        moving = wait_for(lambda: [m for m in bridge.messages("/odom")[odoms_before:]
-                                   if x_of(m) > 0.05], what="the joystick to drive the robot")[0]
+        moving, lift = drag_up(page, bridge, x, y)
         screenshot(page, "phone-joystick.png", full_page=False)
-        finger("touchEnd", [])
+        lift()
         stopped = wait_until_still(bridge)
         assert twist_pairs(bridge.messages("/cmd_vel"))[-1] == (0.0, 0.0)
         assert log.console_errors == [] and log.page_errors == []
