@@ -78,7 +78,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
 from physics import TICK_PERIOD_S
-from ros_nodes.topics import CMD_VEL, ODOM, SCAN, TF, TopicSpec
+from ros_nodes.robot_interface import CMD_VEL, ODOM, SCAN, TF, TopicSpec
 
 PROJECT_DIR = Path(__file__).resolve().parent.parent
 """The checkout: the server runs as ``python -m websim.cli`` from here."""

@@ -95,9 +95,9 @@ from bench_server import (
 )
 from load import Commands
 
-from ros_nodes.rosbridge.classroom import numbered_roster
-from ros_nodes.topics import ODOM
-from websim.nginx_config import Worker, foreground_command, in_directory, nginx_config
+from classroom.nginx_config import Worker, foreground_command, in_directory, nginx_config
+from classroom.registry import numbered_roster
+from ros_nodes.robot_interface import ODOM
 
 PUBLISH_PERIOD_S = 0.1
 """Each driver publishes /cmd_vel at 10 Hz on average."""

@@ -15,7 +15,7 @@ from typing import Any
 from physics import MODES, ConfigError, NoiseParams, RobotParams, Simulation
 from physics.params import field_range, field_unit
 from physics.validation import as_finite_float, as_float_in_range
-from ros_nodes.messages import Base64Bytes, Message
+from rosbridge.msgs.values import Base64Bytes, Message
 
 # rcl_interfaces/msg/ParameterType
 PARAMETER_NOT_SET = 0

@@ -21,7 +21,7 @@ from ros_nodes.parameters import (
     PARAMETER_STRING,
     PARAMETERS,
 )
-from ros_nodes.topics import NODE_NAME, PARAMETER_SERVICES, RESET_SERVICE, ROBOT_TOPICS
+from ros_nodes.robot_interface import NODE_NAME, PARAMETER_SERVICES, RESET_SERVICE, ROBOT_TOPICS
 
 ROBOT_FIELDS = ("max_linear_mps", "max_angular_rps", "footprint_radius_m", "wheelbase_m",
                 "wheel_radius_m", "mass_kg", "inertia_kg_m2", "max_wheel_force_n")

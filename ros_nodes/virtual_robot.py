@@ -2,14 +2,14 @@
 
 A thin adapter around ``VirtualRobot``, which decides what is published, when and with which
 stamp; the same class runs behind the embedded rosbridge server. The node turns its dicts into
-rclpy messages (``ros_nodes.ros_interop``), publishes them with each topic's QoS
-(``ros_nodes.topics``), feeds ``/cmd_vel`` in, and keeps its ROS parameters and
+rclpy messages (``rosbridge.msgs.rclpy_conversion``), publishes them with each topic's QoS
+(``ros_nodes.robot_interface``), feeds ``/cmd_vel`` in, and keeps its ROS parameters and
 ``RobotParameters`` the same table, so ``ros2 param set /virtual_robot mass_kg 2.0`` and the
 admin page do the same thing.
 
 Run it with ``websim-robot [--ros-args -p world:=maze -p mode:=dynamic]`` or
 ``python -m ros_nodes.virtual_robot``. ``websim serve --ros`` runs it in-process instead, ticked
-by the server (see ``ros_nodes.ros_graph``).
+by the server (see ``rosbridge.graph.relay``).
 
 Parameters (``ros2 param describe /virtual_robot NAME`` shows each): ``mode``, ``mass_kg``,
 ``inertia_kg_m2``, ``max_linear_mps``, ``max_angular_rps``, ``max_wheel_force_n`` and
@@ -56,7 +56,6 @@ except ImportError as error:  # pragma: no cover - depends on the installation
 
 from physics import ConfigError, NoiseParams, Simulation, load_params, load_world
 from physics.params import SHIPPED_PARAMS_FILE
-from ros_nodes.messages import prefixed_frames, stamp
 from ros_nodes.node_parameters import add_parameter_callbacks
 from ros_nodes.parameters import (
     PARAMETER_DOUBLE,
@@ -66,15 +65,17 @@ from ros_nodes.parameters import (
     ParameterSpec,
     parameter_spec,
 )
-from ros_nodes.ros_interop import (
+from ros_nodes.robot_interface import CMD_VEL, PUBLISHED_TOPICS, RESET_SERVICE, TopicSpec
+from ros_nodes.robot_messages import prefixed_frames
+from ros_nodes.virtual_robot_core import Publication, VirtualRobot
+from rosbridge.msgs.rclpy_conversion import (
     MessageConversionError,
     PublisherFilter,
     message_class,
     to_dict,
     to_message,
 )
-from ros_nodes.topics import CMD_VEL, PUBLISHED_TOPICS, RESET_SERVICE, TopicSpec
-from ros_nodes.virtual_robot_core import Publication, VirtualRobot
+from rosbridge.msgs.values import stamp
 
 NODE_NAME = "virtual_robot"
 """The node's name, as on the real robot."""

@@ -11,14 +11,15 @@ from collections.abc import Callable, Container
 from typing import Any
 
 from physics import Simulation
-from ros_nodes.messages import (
+from ros_nodes.parameters import RobotParameters
+from ros_nodes.robot_interface import GROUND_TRUTH, ODOM, SCAN, TF, TF_STATIC, WORLD, TopicSpec
+from ros_nodes.robot_messages import (
     BASE_FRAME,
     LASER_FRAME,
     MAP_FRAME,
     ODOM_FRAME,
     ODOM_POSE_VARIANCE,
     ODOM_TWIST_VARIANCE,
-    Message,
     laser_scan_msg,
     odometry_msg,
     tf_msg,
@@ -26,8 +27,7 @@ from ros_nodes.messages import (
     twist_from_msg,
     world_markers_msg,
 )
-from ros_nodes.parameters import RobotParameters
-from ros_nodes.topics import GROUND_TRUTH, ODOM, SCAN, TF, TF_STATIC, WORLD, TopicSpec
+from rosbridge.msgs.values import Message
 
 Publication = tuple[TopicSpec, Message]
 

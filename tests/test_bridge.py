@@ -17,13 +17,13 @@ import pytest
 
 from physics import LidarParams, Simulation, load_world
 from ros_nodes.parameters import PARAMETER_DOUBLE, PARAMETER_STRING
-from ros_nodes.rosbridge.bridge import Bridge, Session
-from ros_nodes.rosbridge.encoding import MAX_NESTING
-from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy, RateLimit
-from ros_nodes.rosbridge.outbox import Outbox
-from ros_nodes.rosbridge.robot_endpoint import RobotEndpoint
-from ros_nodes.rosbridge.schema import OP_FIELDS
+from ros_nodes.robot_endpoint import RobotEndpoint
 from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.core.bridge import Bridge, Session
+from rosbridge.core.encoding import MAX_NESTING
+from rosbridge.core.limits import ClientLimits, OriginPolicy, RateLimit
+from rosbridge.core.outbox import Outbox
+from rosbridge.core.schema import OP_FIELDS
 
 
 class Clock:

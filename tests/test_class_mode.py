@@ -24,17 +24,17 @@ from typing import Any
 import pytest
 import websockets
 
-from physics import ConfigError, Simulation, load_world
-from ros_nodes.rosbridge.classroom import (
+from classroom.registry import (
     Classroom,
     Student,
     derived_token,
     numbered_roster,
     read_roster,
 )
-from ros_nodes.rosbridge.robot_host import RobotHost
-from ros_nodes.rosbridge.session import Session
+from physics import ConfigError, Simulation, load_world
+from ros_nodes.robot_host import RobotHost
 from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.core.session import Session
 
 from server_process import ADMIN_TOKEN, ServerProcess, start_server, wait_for
 

@@ -41,11 +41,11 @@ import yaml
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
+from classroom.nginx_config import foreground_command, in_directory
 from physics.params import PROJECT_DIR
 from ros_nodes.parameters import RobotParameters
-from ros_nodes.topics import ROBOT_TOPICS
+from ros_nodes.robot_interface import ROBOT_TOPICS
 from websim import cli
-from websim.nginx_config import foreground_command, in_directory
 
 from server_process import ServerProcess, free_port, wait_for
 

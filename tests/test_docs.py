@@ -17,8 +17,9 @@ import pytest
 
 from ros_nodes.parameters import markdown_table
 from ros_nodes.robot_description import robot_json
-from ros_nodes.rosbridge import encoding, schema, server
-from ros_nodes.rosbridge.limits import ClientLimits
+from rosbridge.core import encoding, schema
+from rosbridge.core.limits import ClientLimits
+from rosbridge.transport import connection
 from websim.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -42,7 +43,7 @@ def test_readme_limits_table_states_the_defaults_in_force() -> None:
         "bytes waiting to be sent to a client": f"{limits.max_queued_bytes >> 20} MiB",
         "replies waiting (service responses, statuses)": f"{limits.max_replies}",
         "a socket that accepts nothing while frames wait (watched once more than "
-        f"{server.WRITE_BUFFER_BYTES >> 10} KiB wait beyond its kernel buffer)":
+        f"{connection.WRITE_BUFFER_BYTES >> 10} KiB wait beyond its kernel buffer)":
             f"{limits.stall_timeout_s:g} s; the close handshake gets {limits.close_timeout_s:g} s",
         "`queue_length`": f"0 to {schema.MAX_QUEUE_LENGTH}",
         "`throttle_rate`": f"0 to {schema.MAX_THROTTLE_MS:,} ms",

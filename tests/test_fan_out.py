@@ -21,13 +21,14 @@ from websockets.frames import Opcode
 from websockets.streams import StreamReader
 
 from physics import Simulation, load_world
-from ros_nodes.rosbridge.bridge import Bridge, Session
-from ros_nodes.rosbridge.outbox import Outbox
-from ros_nodes.rosbridge.robot_endpoint import RobotEndpoint
-from ros_nodes.rosbridge.robot_host import RobotHost
-from ros_nodes.rosbridge.server import SimServer, start_websocket
-from ros_nodes.rosbridge.wire import WireFrames, serialize
+from ros_nodes.robot_endpoint import RobotEndpoint
+from ros_nodes.robot_host import RobotHost
+from ros_nodes.robot_server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.core.bridge import Bridge, Session
+from rosbridge.core.outbox import Outbox
+from rosbridge.transport.front import start_websocket
+from rosbridge.transport.wire import WireFrames, serialize
 
 TWIST = {"linear": {"x": 0.1, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
 

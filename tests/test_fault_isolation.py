@@ -20,9 +20,10 @@ import pytest
 import websockets
 
 from physics import Pose2D, Simulation, load_world
-from ros_nodes.rosbridge.server import SimServer, start_websocket
-from ros_nodes.topics import ODOM
+from ros_nodes.robot_interface import ODOM
+from ros_nodes.robot_server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.transport.front import start_websocket
 
 from server_process import free_port
 from ws_clients import OdomListener

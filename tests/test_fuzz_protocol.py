@@ -20,7 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from test_bridge import Rig
 
-from ros_nodes.rosbridge.schema import OP_FIELDS
+from rosbridge.core.schema import OP_FIELDS
 
 NAMES = st.sampled_from(["/cmd_vel", "/odom", "/scan", "/tf", "/tf_static", "/world",
                          "/ground_truth", "/chat", "chat", "/rosout", "/reset_simulation",

@@ -13,10 +13,10 @@ from typing import Any
 import pytest
 
 from physics import ConfigError, RobotParams, Simulation, load_world
-from ros_nodes.rosbridge.bridge import Bridge, BridgeError, Session
-from ros_nodes.rosbridge.outbox import Outbox
-from ros_nodes.rosbridge.robot_endpoint import RobotEndpoint
+from ros_nodes.robot_endpoint import RobotEndpoint
 from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.core.bridge import Bridge, BridgeError, Session
+from rosbridge.core.outbox import Outbox
 
 TWIST = {"linear": {"x": 0.3, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
 

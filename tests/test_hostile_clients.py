@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 import websockets
 
-from ros_nodes.rosbridge.limits import ClientLimits
+from rosbridge.core.limits import ClientLimits
 
 from server_process import ServerProcess, start_server, wait_for
 from ws_clients import NonReader, OdomListener

@@ -39,17 +39,17 @@ from std_srvs.srv import Empty  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from physics import RobotParams, Simulation, load_world  # noqa: E402
-from ros_nodes.messages import Float32Sequence  # noqa: E402
 from ros_nodes.parameters import PARAMETER_DOUBLE  # noqa: E402
-from ros_nodes.ros_interop import (  # noqa: E402
+from ros_nodes.robot_interface import PUBLISHED_TOPICS  # noqa: E402
+from ros_nodes.robot_messages import Float32Sequence  # noqa: E402
+from ros_nodes.virtual_robot import TF_MISSING_WARNING  # noqa: E402
+from ros_nodes.virtual_robot_core import VirtualRobot  # noqa: E402
+from rosbridge.msgs.rclpy_conversion import (  # noqa: E402
     MessageConversionError,
     message_class,
     to_dict,
     to_message,
 )
-from ros_nodes.topics import PUBLISHED_TOPICS  # noqa: E402
-from ros_nodes.virtual_robot import TF_MISSING_WARNING  # noqa: E402
-from ros_nodes.virtual_robot_core import VirtualRobot  # noqa: E402
 
 from ros_fixtures import (  # noqa: E402
     DT_S,

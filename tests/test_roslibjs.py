@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 from physics import TICK_PERIOD_S, Pose2D, RobotParams, Simulation, load_world
-from ros_nodes.messages import MARKER_LINE_LIST
 from ros_nodes.parameters import PARAMETER_DOUBLE
+from ros_nodes.robot_messages import MARKER_LINE_LIST
 
 from conftest import ARENA_HALF_M
 from server_process import ServerProcess, wait_for

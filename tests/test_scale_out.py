@@ -28,7 +28,7 @@ from websockets.exceptions import InvalidStatus
 from websockets.sync.client import ClientConnection
 from websockets.sync.client import connect as connect_sync
 
-from websim.nginx_config import Worker, foreground_command, in_directory, nginx_config
+from classroom.nginx_config import Worker, foreground_command, in_directory, nginx_config
 
 from chromium import skip_reason
 from server_process import ADMIN_TOKEN, ServerProcess, free_port, start_server, wait_for

@@ -13,12 +13,12 @@ import time
 from typing import Any
 
 from physics import Simulation, load_world
-from ros_nodes.rosbridge.bridge import Session
-from ros_nodes.rosbridge.outbox import Outbox
-from ros_nodes.rosbridge.robot_host import SHED_SCANS_AFTER_S
-from ros_nodes.rosbridge.schema import MAX_QUEUE_LENGTH
-from ros_nodes.rosbridge.server import SimServer
+from ros_nodes.robot_host import SHED_SCANS_AFTER_S
+from ros_nodes.robot_server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.core.bridge import Session
+from rosbridge.core.outbox import Outbox
+from rosbridge.core.schema import MAX_QUEUE_LENGTH
 
 TICKS = 40
 

@@ -9,7 +9,7 @@ import pytest
 
 from physics import ConfigError, Simulation, load_world
 from physics.world import world_from_dict
-from ros_nodes.messages import MARKER_CUBE, world_markers_msg
+from ros_nodes.robot_messages import MARKER_CUBE, world_markers_msg
 
 from conftest import SHIPPED_WORLDS
 

@@ -7,13 +7,14 @@ import secrets
 import sys
 from collections.abc import Sequence
 
+from classroom import nginx_config
+from classroom.registry import Student
 from physics import MODES, ConfigError, Simulation, load_params, load_world
 from physics.params import SHIPPED_PARAMS_FILE
 from physics.world import WORLDS_DIR
 from ros_nodes.robot_description import robot_json
-from ros_nodes.rosbridge.classroom import Student
 from ros_nodes.virtual_robot_core import VirtualRobot
-from websim import compare_command, nginx_config, sites
+from websim import compare_command, sites
 from websim import serve as serve_command
 
 DEFAULT_WORLD = str(WORLDS_DIR / "empty.yaml")

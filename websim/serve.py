@@ -20,11 +20,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol
 
+from classroom.registry import DEFAULT_IDLE_PAUSE_S, DEFAULT_MAX_ROBOTS
 from physics.shipped import shipped
-from ros_nodes.rosbridge.classroom import DEFAULT_IDLE_PAUSE_S, DEFAULT_MAX_ROBOTS
-from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy
-from ros_nodes.rosbridge.schema import NAME_TOKEN
-from ros_nodes.rosbridge.server import SimServer, start_websocket
+from ros_nodes.robot_server import SimServer
+from rosbridge.core.limits import ClientLimits, OriginPolicy
+from rosbridge.core.schema import NAME_TOKEN
+from rosbridge.transport.front import start_websocket
 from websim.http_server import start_http
 from websim.lan import lan_addresses, qr_lines
 from websim.sites import Site
@@ -266,7 +267,7 @@ def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
     per robot of the roster, whose LiDAR is then cast on every scan tick.
     """
     try:
-        from ros_nodes.ros_graph import ClassRosRuntime, RosRuntime
+        from websim.ros_runtime import ClassRosRuntime, RosRuntime
     except ImportError as error:
         raise RuntimeError(f"--ros needs ROS 2's rclpy: {error} (pip install '.[ros]', "
                            "or source a ROS 2 installation)") from None

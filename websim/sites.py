@@ -15,20 +15,21 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from physics import ConfigError, LidarParams, RobotParams
-from ros_nodes.robot_description import robot_json
-from ros_nodes.rosbridge.class_server import ClassServer
-from ros_nodes.rosbridge.classroom import (
+from classroom.class_server import ClassServer
+from classroom.registry import (
     Classroom,
     Student,
     derived_token,
     numbered_roster,
     read_roster,
 )
-from ros_nodes.rosbridge.limits import ClientLimits, OriginPolicy
-from ros_nodes.rosbridge.robot_host import RobotHost
-from ros_nodes.rosbridge.server import ROBOTS_PREFIX, SimServer, WebSocketFront
+from physics import ConfigError, LidarParams, RobotParams
+from ros_nodes.robot_description import robot_json
+from ros_nodes.robot_host import RobotHost
+from ros_nodes.robot_server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.core.limits import ClientLimits, OriginPolicy
+from rosbridge.transport.front import ROBOTS_PREFIX, WebSocketFront
 
 
 @dataclass

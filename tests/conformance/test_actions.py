@@ -25,8 +25,8 @@ import pytest
 import roslibpy
 from websockets.sync.client import ClientConnection, connect
 
-from ros_nodes.rosbridge.limits import ClientLimits
-from ros_nodes.rosbridge.schema import GoalStatus
+from rosbridge.core.limits import ClientLimits
+from rosbridge.core.schema import GoalStatus
 
 from server_process import ServerProcess, start_server, wait_for
 

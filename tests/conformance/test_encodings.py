@@ -27,13 +27,13 @@ from rosbags.typesys import Stores, get_typestore
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 
-from ros_nodes.messages import Base64Bytes, typed_sequence
-from ros_nodes.rosbridge.bridge import Bridge
-from ros_nodes.rosbridge.capabilities.topics import Encoded
-from ros_nodes.rosbridge.encoding import CBOR_TYPED_ARRAYS, to_cbor
-from ros_nodes.rosbridge.limits import ClientLimits
-from ros_nodes.rosbridge.outbox import Outbox
-from ros_nodes.rosbridge.session import Session
+from rosbridge.core.bridge import Bridge
+from rosbridge.core.capabilities.topics import Encoded
+from rosbridge.core.encoding import CBOR_TYPED_ARRAYS, to_cbor
+from rosbridge.core.limits import ClientLimits
+from rosbridge.core.outbox import Outbox
+from rosbridge.core.session import Session
+from rosbridge.msgs.values import Base64Bytes, typed_sequence
 
 from server_process import ServerProcess, wait_for
 

@@ -40,7 +40,7 @@ from std_msgs.msg import (  # noqa: E402
 from test_typed_relay import NODE, NodeSubscriber, RawClient  # noqa: E402
 from websockets.sync.client import connect  # noqa: E402
 
-from ros_nodes import message_types  # noqa: E402
+from rosbridge.msgs import definitions as message_types  # noqa: E402
 
 from ros_fixtures import LATCHED, RELIABLE, STARTUP_TIMEOUT_S, Graph  # noqa: E402
 from server_process import ServerProcess, wait_for  # noqa: E402

@@ -23,9 +23,9 @@ import pytest
 import roslibpy
 import websockets.sync.client as ws_client
 
-from ros_nodes.rosbridge.rosapi import ROSAPI_SERVICES
-from ros_nodes.rosbridge.rosout import LOG_BURST, WARN
-from ros_nodes.topics import NODE_TOPICS, ROBOT_TOPICS
+from ros_nodes.robot_interface import NODE_TOPICS, ROBOT_TOPICS
+from ros_nodes.rosapi import ROSAPI_SERVICES
+from ros_nodes.rosout import LOG_BURST, WARN
 
 from server_process import ServerProcess, wait_for
 

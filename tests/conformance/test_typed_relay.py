@@ -28,7 +28,8 @@ import pytest
 import roslibpy
 from websockets.sync.client import ClientConnection, connect
 
-from ros_nodes.message_types import COURSE_PACKAGES, INTEGER_RANGES, packages
+from rosbridge.msgs.checks import INTEGER_RANGES
+from rosbridge.msgs.definitions import COURSE_PACKAGES, packages
 
 from server_process import ServerProcess, wait_for
 

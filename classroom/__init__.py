@@ -1,0 +1,1 @@
+"""A class: the roster, the registry of robots, the class server, the instructor's view."""

@@ -1,0 +1,85 @@
+"""The WebSocket front of a class: ``ws://HOST:9090/robots/NAME`` is robot NAME.
+
+``ws://HOST:9090/`` with the instructor's token is the instructor's view of every robot, its
+names under ``/NAME/`` (``instructor_view.py``). Inside a robot's URL everything is as on the
+real robot (``/cmd_vel``, ``/odom``, ``/scan``, the
+parameter services, ``/reset_simulation``, un-namespaced), so a student's code for their
+robot works on the real robot with only the URL changed. The admin token rules every robot;
+each robot's own token rules that robot only.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from classroom.instructor_view import InstructorView
+from classroom.registry import Classroom
+from rosbridge.core.limits import ClientLimits, OriginPolicy
+from rosbridge.transport.connection import Hub
+from rosbridge.transport.front import ROBOTS_PREFIX, Destination, WebSocketFront
+from rosbridge.transport.schedule import Schedule
+
+ROOT_REFUSAL = ("this server hosts a class: connect to ws://HOST:PORT/robots/NAME for robot "
+                "NAME (ws://HOST:PORT/ is the instructor's view of every robot: it needs "
+                "the instructor's token)")
+
+
+class ClassServer(WebSocketFront):
+    """Many robots behind one WebSocket port, routed by path.
+
+    Args:
+        classroom: the robots.
+        admin_token: the instructor's secret, admin on every robot.
+        limits: the bounds every client lives within.
+        origins: which web pages may connect; None: any (tests and benchmarks).
+    """
+
+    def __init__(self, classroom: Classroom, admin_token: str,
+                 limits: ClientLimits | None = None,
+                 origins: OriginPolicy | None = None) -> None:
+        super().__init__(admin_token, limits, origins)
+        self.classroom = classroom
+
+    def route(self, path: str) -> tuple[Destination, str | None] | str:
+        """``/robots/NAME`` (a trailing slash allowed) is robot NAME; nothing else is a robot."""
+        if not path.startswith(ROBOTS_PREFIX):
+            return ROOT_REFUSAL
+        name = path[len(ROBOTS_PREFIX):].rstrip("/")
+        host = self.classroom.get(name)
+        if host is not None:
+            return host, name
+        if self.classroom.open_class and len(self.classroom) >= self.classroom.max_robots:
+            return f"the class is full ({self.classroom.max_robots} robots)"
+        return f"no robot named '{name[:40]}' in this class"
+
+    def root_view(self, path: str, token: str | None) -> tuple[Hub, Schedule] | None:
+        """The instructor's view of every robot, at ``/`` with the instructor's token."""
+        if path.startswith(ROBOTS_PREFIX) or not self.is_admin_token(token):
+            return None
+        return InstructorView(self.classroom), self.classroom.schedule
+
+    def robot_admin(self, name: str | None, token: str | None) -> bool:
+        """A robot's own token is admin on that robot."""
+        return name is not None and self.classroom.is_robot_token(name, token)
+
+    async def run_ticks(self) -> None:
+        """Tick every robot forever."""
+        await self.classroom.run_ticks()
+
+    def health(self) -> dict[str, Any]:
+        """The class: totals, and each robot's own report under ``robots``."""
+        robots = {name: host.health() for name, host in self.classroom}
+        degraded = [name for name, report in robots.items() if report["status"] != "ok"]
+        return {
+            "status": "degraded" if degraded else "ok",
+            "degraded_robots": degraded,
+            "uptime_s": self._uptime_s(),
+            "ticks_due": self.classroom.schedule.ticks_due(),
+            "robot_count": len(robots),
+            "paused_robots": sum(1 for report in robots.values() if report["paused"]),
+            "clients": sum(report["clients"] for report in robots.values()),
+            "queued_bytes": sum(report["queued_bytes"] for report in robots.values()),
+            "tick_jitter_p99_ms": max((report["tick_jitter_p99_ms"]
+                                       for report in robots.values()), default=0.0),
+            "robots": robots,
+        }

@@ -1,0 +1,247 @@
+"""A class: one independent robot per student on one server, by name.
+
+``Classroom`` is the one registry of tenants (STYLE 16): it creates a ``RobotHost`` (its
+simulation, bridge and token) per roster entry, or on first connection in an open class,
+and nothing of one robot is reachable from another's objects. All robots follow one tick
+``Schedule``; a robot nobody has been connected to for the idle time stops ticking.
+
+Roster files: one student a line, ``name`` or ``name,world`` or ``name,world,token``
+(names ``[a-z0-9_-]{1,32}``; an empty world field means the server's ``--world``); ``#``
+starts a comment.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import hashlib
+import hmac
+import re
+import secrets
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from physics import TICK_PERIOD_S, ConfigError
+from physics.simulation import cast_scans
+from ros_nodes.robot_host import RobotHost
+from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.transport.schedule import Schedule
+
+ROBOT_NAME = re.compile(r"[a-z0-9_-]{1,32}")
+"""What a robot (student) name may be: it becomes a URL path segment and a ROS namespace."""
+
+DEFAULT_MAX_ROBOTS = 200
+"""Most robots an open class enrols (``--max-robots``)."""
+
+DEFAULT_IDLE_PAUSE_S = 600.0
+"""A robot nobody has been connected to for this long stops ticking (``--idle-pause``)."""
+
+SPREAD = 0.8
+"""Share of the tick period the robots' ticks are spread over (the last robot steps 40 ms
+after the first at 20 Hz, leaving the rest of the period for the frames to go out)."""
+
+SLOTS = 10
+"""The spread's slots per period: robots are ticked in up to this many groups, one group every
+``SPREAD / SLOTS`` of the period (4 ms at 20 Hz). A robot's frames go out after its group, not
+after the whole class; and the event loop wakes ten times a tick, not once per robot."""
+
+TOKEN_BYTES = 12
+"""Random bytes of a generated robot token (16 URL-safe characters)."""
+
+
+@dataclass(frozen=True)
+class Student:
+    """One roster entry.
+
+    Attributes:
+        name: the robot's name (``[a-z0-9_-]{1,32}``): ``/robots/NAME``.
+        world: a world for this robot (file or shipped name); None: the server's.
+        token: the robot's own admin token; None: a random one is made.
+    """
+
+    name: str
+    world: str | None = None
+    token: str | None = None
+
+
+def check_name(name: str, where: str = "robot name") -> str:
+    """``name`` if it is a valid robot name; ConfigError otherwise."""
+    if not ROBOT_NAME.fullmatch(name):
+        raise ConfigError(f"{where}: '{name[:40]}' is not a robot name (1 to 32 of a-z, 0-9, "
+                          "_ and -)")
+    return name
+
+
+def read_roster(path: str | Path) -> list[Student]:
+    """The students of a roster file, in order.
+
+    Raises:
+        ConfigError: unreadable file, a bad or repeated name, too many fields; the message
+            names the file and the line.
+    """
+    source = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as error:
+        raise ConfigError(f"{source}: cannot read roster: {error.strerror}") from None
+    students: list[Student] = []
+    seen: set[str] = set()
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        fields = [field.strip() for field in line.split(",")]
+        where = f"{source}:{number}"
+        if len(fields) > 3:
+            raise ConfigError(f"{where}: expected name[,world[,token]], got {len(fields)} "
+                              "fields")
+        name = check_name(fields[0], where)
+        if name in seen:
+            raise ConfigError(f"{where}: '{name}' is on the roster twice")
+        seen.add(name)
+        world = fields[1] if len(fields) > 1 and fields[1] else None
+        token = fields[2] if len(fields) > 2 and fields[2] else None
+        students.append(Student(name, world, token))
+    if not students:
+        raise ConfigError(f"{source}: the roster names no student")
+    return students
+
+
+def derived_token(secret: str, name: str) -> str:
+    """Robot ``name``'s token derived from the instructor's ``secret`` (HMAC-SHA256).
+
+    The same secret gives the same tokens after a restart (the links file stays valid) and
+    on every process of a class; a student's token says nothing of the secret or of other
+    robots' tokens.
+    """
+    digest = hmac.new(secret.encode(), f"websim robot {name}".encode(), hashlib.sha256)
+    return base64.urlsafe_b64encode(digest.digest()[:TOKEN_BYTES]).decode()
+
+
+def numbered_roster(count: int) -> list[Student]:
+    """``robot01`` ... ``robotNN`` (at least two digits)."""
+    if not 1 <= count <= DEFAULT_MAX_ROBOTS * 10:
+        raise ConfigError(f"--class: between 1 and {DEFAULT_MAX_ROBOTS * 10} robots, "
+                          f"got {count}")
+    width = max(2, len(str(count)))
+    return [Student(f"robot{index:0{width}d}") for index in range(1, count + 1)]
+
+
+class Classroom:
+    """Every robot of one server, by name.
+
+    Args:
+        roster: the students known at start.
+        make_robot: builds a student's robot (its world, the server's parameters).
+        schedule: the tick schedule all robots follow.
+        open_class: enrol unknown names on their first connection.
+        max_robots: most robots an open class holds.
+        idle_pause_s: a robot nobody has been connected to for this long pauses.
+        make_token: makes robot NAME's token when the roster gives none (default: random).
+        lazy: create a robot on its first ``get`` rather than at start (a worker of a class
+            spread over several processes hosts only the robots routed to it).
+    """
+
+    def __init__(self, roster: list[Student], make_robot: Callable[[Student], VirtualRobot],
+                 schedule: Schedule | None = None, *, open_class: bool = False,
+                 max_robots: int = DEFAULT_MAX_ROBOTS,
+                 idle_pause_s: float | None = DEFAULT_IDLE_PAUSE_S,
+                 make_token: Callable[[str], str] | None = None, lazy: bool = False) -> None:
+        self.schedule = schedule or Schedule(TICK_PERIOD_S)
+        self.open_class = open_class
+        self.max_robots = max(max_robots, len(roster))
+        self._make_robot = make_robot
+        self._idle_pause_s = idle_pause_s
+        self._make_token = make_token or (lambda name: secrets.token_urlsafe(TOKEN_BYTES))
+        self._hosts: dict[str, RobotHost] = {}
+        self._tokens: dict[str, str] = {}
+        self.students: dict[str, Student] = {student.name: student for student in roster}
+        if not lazy:
+            for student in roster:
+                self._enrol(student)
+
+    def _enrol(self, student: Student) -> RobotHost:
+        host = RobotHost(self._make_robot(student), self.schedule, self._idle_pause_s)
+        self._hosts[student.name] = host
+        self.students[student.name] = student
+        self.token(student.name)
+        return host
+
+    def __iter__(self) -> Iterator[tuple[str, RobotHost]]:
+        return iter(list(self._hosts.items()))
+
+    def __len__(self) -> int:
+        return len(self._hosts)
+
+    def knows(self, name: str) -> bool:
+        """Whether ``name`` is (or may become, in an open class) a robot here, creating none."""
+        return name in self.students or (self.open_class and ROBOT_NAME.fullmatch(name)
+                                         is not None)
+
+    def get(self, name: str) -> RobotHost | None:
+        """The robot ``name``, created now if it is not yet (lazily, or enrolling).
+
+        None: no such robot (unknown, invalid, or the open class is full).
+        """
+        host = self._hosts.get(name)
+        if host is not None or not self.knows(name):
+            return host
+        if name not in self.students and len(self._hosts) >= self.max_robots:
+            return None
+        return self._enrol(self.students.get(name, Student(name)))
+
+    def token(self, name: str) -> str:
+        """Robot ``name``'s own admin token (roster robots, created or not)."""
+        if name not in self._tokens:
+            student = self.students[name]
+            self._tokens[name] = student.token or self._make_token(name)
+        return self._tokens[name]
+
+    def is_robot_token(self, name: str, presented: str | None) -> bool:
+        """Constant-time check of a token presented for robot ``name``."""
+        expected = self.token(name) if name in self.students else self._tokens.get(name)
+        if not presented or expected is None:
+            return False
+        return hmac.compare_digest(presented.encode(), expected.encode())
+
+    async def run_ticks(self) -> None:
+        """Tick every robot on the one schedule, forever (each robot's faults stay its own).
+
+        The robots' ticks are spread over ``SPREAD`` of the period in up to ``SLOTS``
+        groups, each group at its own offset: a robot's frames go out right after its group's
+        steps instead of waiting for every other robot's, so its latency does not grow with
+        the class, and the work of a tick does not arrive on the event loop all at once.
+        """
+        await self.schedule.run(self._tick_all)
+
+    def _tick_all(self, lateness_s: float) -> None:
+        hosts = [host for _, host in self]
+        if not hosts:
+            return
+        loop = asyncio.get_running_loop()
+        now = loop.time()
+        slots = min(SLOTS, len(hosts))
+        slot_s = SPREAD * self.schedule.period_s / slots
+        groups = [hosts[index::slots] for index in range(slots)]
+        self._tick_group(groups[0], now, lateness_s)
+        for index, group in enumerate(groups[1:], start=1):
+            due_s = now + index * slot_s
+            # One loop turn later: a /cmd_vel that arrived with the timer is applied first
+            # (its reader was woken by the same poll, and runs before what call_soon adds).
+            loop.call_at(due_s, loop.call_soon, self._tick_group, group, due_s, lateness_s)
+
+    @staticmethod
+    def _tick_group(hosts: list[RobotHost], due_s: float, lateness_s: float) -> None:
+        """Advance a group's robots, cast their scans together, then deliver each's tick."""
+        late_s = lateness_s + max(0.0, asyncio.get_running_loop().time() - due_s)
+        advanced = [host for host in hosts if host.begin_tick(late_s)]
+        scanning = [host for host in advanced if host.scan_due(late_s)]
+        if len(scanning) > 1:
+            try:
+                cast_scans([host.robot.sim for host in scanning])
+            except Exception as error:  # each robot then casts its own, within its boundary
+                for host in scanning:
+                    host.faults.record("casting the class's scans together", error)
+        for host in advanced:
+            host.end_tick(late_s)

@@ -1,0 +1,259 @@
+"""One robot in real time: its simulation, its bridge, its tick loop, its health.
+
+A ``RobotHost`` owns everything of one robot and nothing of another, so a server may run
+several. Its tick loop runs against the monotonic clock (deadlines advance by exactly one
+period, so there is no drift) and is the robot's fault boundary: an exception while stepping
+the robot, or while encoding or delivering one of its messages, is recorded
+(``Faults``: logged once with the cause, counted, ``/healthz`` says ``degraded``) and the loop
+goes on; a robot whose state went non-finite is reset to its spawn pose. When the host cannot
+keep up (a tick starts half a period late), that tick's /scan is shed first; /odom and /tf
+keep their rate.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections import deque
+from collections.abc import Callable, Collection, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from physics import TICK_PERIOD_S, ConfigError
+from ros_nodes.robot_endpoint import RobotEndpoint
+from ros_nodes.robot_interface import SCAN
+from ros_nodes.robot_services import require_admin
+from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.core.bridge import Bridge
+from rosbridge.core.errors import ServiceError
+from rosbridge.core.faults import Faults
+from rosbridge.core.session import Session
+from rosbridge.transport.schedule import Schedule
+
+log = logging.getLogger("websim.robot")
+
+SHED_SCANS_AFTER_S = 0.025
+"""A tick that starts this late (half a period: the host cannot keep up with the clients)
+publishes no /scan: the biggest message goes first, /odom and /tf keep their rate."""
+
+STATUS_SERVICE = "/websim/status"
+"""Admin only: a robot's clients and their addresses, its last driver, collisions, mode,
+payload and whether it is paused (the instructor's dashboard polls it)."""
+
+PAUSE_SERVICE = "/websim/pause"
+"""Admin only: ``{paused: true}`` holds the robot, ``{paused: false}`` lets it run."""
+
+
+@dataclass
+class TickStats:
+    """What one robot's ticks have done, for /healthz and benchmarks.
+
+    Attributes:
+        ticks: ticks run since start (paused ones not counted).
+        lateness_s: how late each recent tick started after its deadline (s).
+        scans_shed: /scan messages not published because their tick was late.
+        scans_cast: LiDAR scans computed (only on ticks where a client subscribes to /scan,
+            or a ROS graph is attached).
+        resets: times the robot was reset because a fault left it in a non-finite state.
+        paused: whether the robot is paused now (nobody connected for the idle time).
+    """
+
+    ticks: int = 0
+    lateness_s: deque[float] = field(default_factory=lambda: deque(maxlen=1200))
+    scans_shed: int = 0
+    scans_cast: int = 0
+    resets: int = 0
+    paused: bool = False
+
+    def jitter_p99_ms(self) -> float:
+        """99th percentile of recent tick lateness (ms)."""
+        samples = sorted(self.lateness_s)
+        if not samples:
+            return 0.0
+        return 1000.0 * samples[min(len(samples) - 1, int(0.99 * len(samples)))]
+
+
+class RobotHost:
+    """A robot, its bridge and its ticks.
+
+    Args:
+        robot: the virtual robot to run.
+        schedule: the tick schedule it follows (default: one of its own).
+        idle_pause_s: stop ticking (keeping the state) once nobody has been connected for
+            this long; the next connection resumes it. None: never pause.
+        clock: monotonic clock (s), for the idle time and the bridge's throttles.
+    """
+
+    def __init__(self, robot: VirtualRobot, schedule: Schedule | None = None,
+                 idle_pause_s: float | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.robot = robot
+        self.faults = Faults()
+        self.bridge = Bridge(clock=clock, faults=self.faults, refusals=(ConfigError,))
+        self.endpoint = RobotEndpoint(self.bridge, robot)
+        self.stats = TickStats()
+        self.schedule = schedule or Schedule(TICK_PERIOD_S)
+        self.held = False
+        """Paused by an admin (``/websim/pause``), whoever is connected."""
+        self.always_scan = False
+        """Cast the LiDAR whether or not a client subscribes (a ROS node publishes it)."""
+        self._idle_pause_s = idle_pause_s
+        self._clock = clock
+        self._last_client_s = clock()
+        self.bridge.services.add(STATUS_SERVICE, "websim/srv/RobotStatus", self._status)
+        self.bridge.services.add(PAUSE_SERVICE, "websim/srv/Pause", self._pause)
+        sim = robot.sim
+        self.endpoint.log.info(f"world '{sim.world.name}', {sim.mode} mode")
+
+    async def run_ticks(self) -> None:
+        """Tick this robot alone, forever."""
+        await self.schedule.run(self.tick)
+
+    def _idle(self) -> bool:
+        """Whether the robot should pause: nobody connected for ``idle_pause_s``."""
+        if self.bridge.sessions:
+            self._last_client_s = self._clock()
+            return False
+        return self._idle_pause_s is not None and \
+            self._clock() - self._last_client_s >= self._idle_pause_s
+
+    def tick(self, lateness_s: float = 0.0) -> None:
+        """One tick: step the robot, deliver its messages, expire service calls; never raises.
+
+        A robot nobody has been connected to for ``idle_pause_s`` is not stepped (paused).
+        ``begin_tick`` then ``end_tick``; a class casts its robots' scans in between
+        (``physics.simulation.cast_scans``).
+        """
+        if self.begin_tick(lateness_s):
+            self.end_tick(lateness_s)
+
+    def begin_tick(self, lateness_s: float = 0.0) -> bool:
+        """Advance the robot one tick, unless it is paused; whether it advanced. Never raises.
+
+        A robot whose step failed, or whose state went non-finite, is reset to its spawn pose.
+        """
+        idle = self._idle()  # first: it notes when clients were last here
+        self.stats.paused = self.held or idle
+        if self.stats.paused:
+            return False
+        self.stats.ticks += 1
+        self.stats.lateness_s.append(lateness_s)
+        try:
+            self.robot.advance()
+        except Exception as error:  # the robot's boundary: record, recover, go on
+            self.faults.record("stepping the robot", error)
+            self._recover("its step failed")
+            return False
+        truth = self.robot.sim.ground_truth()
+        if not all(math.isfinite(value) for value in truth):
+            self.faults.record("stepping the robot", FloatingPointError(
+                f"non-finite state {tuple(truth)}"))
+            self._recover("its state went non-finite")
+            return False
+        return True
+
+    def scan_due(self, lateness_s: float = 0.0) -> bool:
+        """Whether ``end_tick`` will cast a /scan (someone wants it, and the tick is on time)."""
+        return lateness_s <= SHED_SCANS_AFTER_S and self.robot.scan_due(*self._wants())
+
+    def end_tick(self, lateness_s: float = 0.0) -> None:
+        """Build and deliver the messages of the tick ``begin_tick`` advanced to; never raises.
+
+        Only messages some client subscribes to are built (for a ROS graph: all). A tick that
+        starts half a period late casts no /scan: it is shed, /odom and /tf keep their rate.
+        """
+        scan, wanted = self._wants()
+        if scan and lateness_s > SHED_SCANS_AFTER_S and self.robot.scan_due(scan, wanted):
+            self.stats.scans_shed += 1
+            scan = False
+        try:
+            publications = self.robot.publications(scan, wanted)
+        except Exception as error:  # the robot's boundary: record, recover, go on
+            self.faults.record("stepping the robot", error)
+            self._recover("building its messages failed")
+            publications = []
+        messages = []
+        for spec, msg in publications:
+            if spec is SCAN:
+                self.stats.scans_cast += 1
+            messages.append((spec.name, msg))
+        try:  # throttles count from when the tick was due: a late tick is no shorter gap
+            self.bridge.publish_many(messages, self.bridge.clock() - lateness_s)
+        except Exception as error:  # the robot's boundary: record, go on
+            self.faults.record(f"delivering {', '.join(name for name, _ in messages)}", error)
+        try:
+            self.bridge.services.expire()
+        except Exception as error:
+            self.faults.record("expiring service calls", error)
+
+    def _wants(self) -> tuple[bool, Collection[str] | None]:
+        """(scan, wanted) for the robot: what its clients subscribe to (a graph: all)."""
+        topics = self.bridge.topics
+        if self.always_scan or self.bridge.graph.attached:
+            return True, None
+        return topics.has_subscribers(SCAN.name), topics.subscribed_topics()
+
+    def _recover(self, why: str) -> None:
+        """Put the robot back at spawn (a finite state) after a fault."""
+        self.stats.resets += 1
+        log.error("robot reset to its spawn pose: %s", why)
+        self.endpoint.log.error(f"reset to the spawn pose: {why}")
+        try:
+            self.robot.reset()
+        except Exception as error:
+            self.faults.record("resetting the robot", error)
+
+    def _status(self, args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        """``/websim/status``: who is connected and driving, collisions, mode and payload."""
+        require_admin(session, STATUS_SERVICE)
+        params = self.robot.sim.params
+        drive_s = self.endpoint.last_drive_s
+        return {
+            "clients": [{"address": other.peer, "admin": other.is_admin}
+                        for other in sorted(self.bridge.sessions, key=lambda s: s.peer)],
+            "last_driver": self.endpoint.last_driver,
+            "last_drive_age_s": None if drive_s is None
+            else round(time.monotonic() - drive_s, 3),
+            "collisions": self.robot.collisions,
+            "mode": self.robot.sim.mode,
+            "mass_kg": params.mass_kg,
+            "inertia_kg_m2": params.inertia_kg_m2,
+            "paused": self.stats.paused,
+            "held": self.held,
+            "speed_mps": self.robot.sim.ground_truth().v,
+        }
+
+    def _pause(self, args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        """``/websim/pause`` ``{paused: bool}``: hold the robot (or let it run again)."""
+        require_admin(session, PAUSE_SERVICE)
+        paused = args.get("paused")
+        if not isinstance(paused, bool):
+            raise ServiceError(f"{PAUSE_SERVICE}: args must be {{paused: true or false}}")
+        self.held = paused
+        self.stats.paused = paused or self._idle()
+        return {"paused": self.held}
+
+    def health(self) -> dict[str, Any]:
+        """This robot's part of /healthz."""
+        sessions = self.bridge.sessions
+        report: dict[str, Any] = {
+            "status": "degraded" if self.faults.degraded else "ok",
+            "ticks": self.stats.ticks,
+            "ticks_due": self.schedule.ticks_due(),
+            "paused": self.stats.paused,
+            "tick_jitter_p99_ms": round(self.stats.jitter_p99_ms(), 3),
+            "tick_resyncs": self.schedule.resyncs,
+            "scans_shed": self.stats.scans_shed,
+            "scans_cast": self.stats.scans_cast,
+            "robot_resets": self.stats.resets,
+            "clients": len(sessions),
+            "queued_frames": sum(len(session.outbox) for session in sessions),
+            "queued_bytes": sum(session.outbox.queued_bytes for session in sessions),
+            "sim_time_s": round(self.robot.sim.time_s, 3),
+            "mode": self.robot.sim.mode,
+            "world": self.robot.sim.world.name,
+            "last_driver": self.endpoint.last_driver,
+        }
+        report.update(self.faults.report())
+        return report

@@ -1,0 +1,222 @@
+"""The one definition of every ROS message the robot sends or reads, as plain dicts.
+
+The embedded bridge and the rclpy node share these builders, so both publish the same shapes.
+Field names and nesting are those of ROS 2 (``builtin_interfaces/Time`` is ``{sec,
+nanosec}``); the value conventions (``TypedSequence``, ``Base64Bytes``) are
+``rosbridge.msgs.values``'. Non-finite floats are the encoders' concern
+(``rosbridge.core.encoding``).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from physics import ConfigError, LaserScan, Odometry, World
+from physics.validation import as_finite_float
+from rosbridge.msgs.values import Base64Bytes, Float32Sequence, Message, stamp, typed_sequence
+
+ODOM_FRAME = "odom"
+BASE_FRAME = "base_link"
+LASER_FRAME = "laser"
+MAP_FRAME = "map"
+
+UNUSED_COVARIANCE = 1e6
+"""Variance of the degrees of freedom a planar robot does not measure (z, roll, pitch)."""
+
+ODOM_POSE_VARIANCE = 1e-3
+"""Variance reported for odometry x, y and yaw when no noise model says otherwise (m^2, rad^2)."""
+
+ODOM_TWIST_VARIANCE = 1e-4
+"""Variance reported for odometry speeds when no noise model says otherwise."""
+
+
+def prefixed_frames(msg: Message, prefix: str) -> Message:
+    """A copy of a robot message with ``prefix`` before every frame id it names.
+
+    Covers what the robot publishes: ``header.frame_id``, ``child_frame_id``, the transforms
+    of a ``TFMessage`` and the markers of a ``MarkerArray`` (``alice/`` + ``odom``).
+    """
+    def renamed(item: Any) -> Any:
+        if isinstance(item, dict):
+            out = {key: renamed(value) for key, value in item.items()}
+            for key in ("frame_id", "child_frame_id"):
+                if isinstance(out.get(key), str) and out[key]:
+                    out[key] = prefix + out[key]
+            return out
+        if isinstance(item, list) and item and isinstance(item[0], dict):
+            return [renamed(value) for value in item]
+        return item
+
+    result: Message = renamed(msg)
+    return result
+
+
+def header(time_s: float, frame_id: str) -> Message:
+    """``std_msgs/Header``."""
+    return {"stamp": stamp(time_s), "frame_id": frame_id}
+
+
+def vector3(x: float = 0.0, y: float = 0.0, z: float = 0.0) -> Message:
+    """``geometry_msgs/Vector3`` (also the shape of ``Point``)."""
+    return {"x": x, "y": y, "z": z}
+
+
+def yaw_quaternion(theta: float) -> Message:
+    """``geometry_msgs/Quaternion`` of a yaw ``theta`` (course text: w = cos, z = sin of θ/2)."""
+    return {"x": 0.0, "y": 0.0, "z": math.sin(theta / 2.0), "w": math.cos(theta / 2.0)}
+
+
+def diagonal_covariance(diagonal: tuple[float, ...]) -> list[float]:
+    """A row-major 6 x 6 covariance (``float64[36]``) with ``diagonal`` on its diagonal."""
+    return typed_sequence("float64", _diagonal_matrix(diagonal))
+
+
+@functools.lru_cache(maxsize=64)
+def _diagonal_matrix(diagonal: tuple[float, ...]) -> tuple[float, ...]:
+    """Built once per diagonal: the same few diagonals come every tick."""
+    matrix = [0.0] * 36
+    for index, value in enumerate(diagonal):
+        matrix[index * 7] = value
+    return tuple(matrix)
+
+
+def odometry_msg(odom: Odometry, time_s: float, frame_id: str,
+                 pose_variance: tuple[float, float, float] | None = None,
+                 twist_variance: tuple[float, float] | None = None) -> Message:
+    """``nav_msgs/Odometry`` of a pose in ``frame_id`` with body-frame speeds in base_link.
+
+    Args:
+        odom: pose (m, rad) and speeds (m/s, rad/s).
+        time_s: stamp (s).
+        frame_id: ``odom`` for odometry, ``map`` for ground truth.
+        pose_variance: variances of x, y, yaw; ``None`` gives zeros (exact ground truth).
+        twist_variance: variances of v and omega; ``None`` gives zeros.
+    """
+    px, py, pyaw = pose_variance or (0.0, 0.0, 0.0)
+    tv, tw = twist_variance or (0.0, 0.0)
+    unused = UNUSED_COVARIANCE if pose_variance else 0.0
+    return {
+        "header": header(time_s, frame_id),
+        "child_frame_id": BASE_FRAME,
+        "pose": {
+            "pose": {"position": vector3(odom.x, odom.y),
+                     "orientation": yaw_quaternion(odom.theta)},
+            "covariance": diagonal_covariance((px, py, unused, unused, unused, pyaw)),
+        },
+        "twist": {
+            "twist": {"linear": vector3(odom.v), "angular": vector3(z=odom.omega)},
+            "covariance": diagonal_covariance((tv, tv if twist_variance else 0.0, unused,
+                                               unused, unused, tw)),
+        },
+    }
+
+
+def laser_scan_msg(scan: LaserScan, time_s: float, frame_id: str = LASER_FRAME) -> Message:
+    """``sensor_msgs/LaserScan``; ``ranges`` keep their floats (inf included)."""
+    return {
+        "header": header(time_s, frame_id),
+        "angle_min": scan.angle_min,
+        "angle_max": scan.angle_max,
+        "angle_increment": scan.angle_increment,
+        "time_increment": scan.time_increment,
+        "scan_time": scan.scan_time,
+        "range_min": scan.range_min,
+        "range_max": scan.range_max,
+        "ranges": Float32Sequence(scan.ranges),
+        "intensities": Float32Sequence(),
+    }
+
+
+def transform_stamped_msg(time_s: float, parent: str, child: str, x: float, y: float,
+                          theta: float) -> Message:
+    """``geometry_msgs/TransformStamped`` of a planar pose of ``child`` in ``parent``."""
+    return {
+        "header": header(time_s, parent),
+        "child_frame_id": child,
+        "transform": {"translation": vector3(x, y), "rotation": yaw_quaternion(theta)},
+    }
+
+
+def tf_msg(transforms: Sequence[Message]) -> Message:
+    """``tf2_msgs/TFMessage``."""
+    return {"transforms": list(transforms)}
+
+
+MARKER_LINE_LIST = 5
+MARKER_CYLINDER = 3
+MARKER_CUBE = 1
+MARKER_ADD = 0
+
+
+def _marker(time_s: float, marker_id: int, marker_type: int, pose: Message, scale: Message,
+            color: Message, points: list[Message]) -> Message:
+    return {
+        "header": header(time_s, MAP_FRAME), "ns": "world", "id": marker_id,
+        "type": marker_type, "action": MARKER_ADD,
+        "pose": pose, "scale": scale, "color": color,
+        "lifetime": {"sec": 0, "nanosec": 0}, "frame_locked": False,
+        "points": points, "colors": [], "texture_resource": "",
+        "texture": {"header": header(0.0, ""), "format": "", "data": Base64Bytes()},
+        "uv_coordinates": [], "text": "", "mesh_resource": "",
+        "mesh_file": {"filename": "", "data": Base64Bytes()}, "mesh_use_embedded_materials": False,
+    }
+
+
+WALL_COLOR = {"r": 0.2, "g": 0.2, "b": 0.25, "a": 1.0}
+WALL_LINE_WIDTH_M = 0.02
+
+
+def world_markers_msg(world: World, time_s: float) -> Message:
+    """``visualization_msgs/MarkerArray`` of the world, in ``map``.
+
+    The walls as one LINE_LIST, each disc a CYLINDER, each box a CUBE (drawn filled; its
+    sides are in the LINE_LIST too).
+    """
+    identity = {"position": vector3(), "orientation": yaw_quaternion(0.0)}
+    points = []
+    for wall in world.walls:
+        points += [vector3(wall.x1, wall.y1), vector3(wall.x2, wall.y2)]
+    markers = [_marker(time_s, 0, MARKER_LINE_LIST, identity, vector3(WALL_LINE_WIDTH_M),
+                       WALL_COLOR, points)]
+    for index, disc in enumerate(world.circles, start=1):
+        pose = {"position": vector3(disc.x, disc.y), "orientation": yaw_quaternion(0.0)}
+        size = 2.0 * disc.radius_m
+        markers.append(_marker(time_s, index, MARKER_CYLINDER, pose, vector3(size, size, 0.3),
+                               WALL_COLOR, []))
+    for index, box in enumerate(world.boxes, start=1 + len(world.circles)):
+        pose = {"position": vector3(box.x, box.y), "orientation": yaw_quaternion(box.yaw_rad)}
+        markers.append(_marker(time_s, index, MARKER_CUBE, pose,
+                               vector3(box.width_m, box.height_m, 0.3), WALL_COLOR, []))
+    return {"markers": markers}
+
+
+def twist_from_msg(msg: Any, stamped: bool = False) -> tuple[float, float]:
+    """``(linear.x, angular.z)`` from a ``geometry_msgs/Twist`` (or ``TwistStamped``) dict.
+
+    Missing fields count as 0, as rosbridge fills them.
+
+    Raises:
+        ConfigError: a field is not an object, or a speed is not a finite number.
+    """
+    if stamped:
+        msg = _field(msg, "twist", "TwistStamped")
+    linear = _field(msg, "linear", "Twist")
+    angular = _field(msg, "angular", "Twist")
+    for name, part in (("linear", linear), ("angular", angular)):
+        for axis in ("x", "y", "z"):
+            if axis in part:
+                as_finite_float(f"{name}.{axis}", part[axis])
+    return (as_finite_float("linear.x", linear.get("x", 0.0)),
+            as_finite_float("angular.z", angular.get("z", 0.0)))
+
+
+def _field(msg: Any, name: str, type_name: str) -> Mapping[str, Any]:
+    if not isinstance(msg, Mapping):
+        raise ConfigError(f"{type_name}: expected an object, got {type(msg).__name__}")
+    value = msg.get(name, {})
+    if not isinstance(value, Mapping):
+        raise ConfigError(f"{name}: expected an object, got {type(value).__name__} {value!r}")
+    return value

@@ -1,0 +1,60 @@
+"""The WebSocket front of ``websim serve`` with one robot: every path but ``/robots/...``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from physics import TICK_PERIOD_S
+from ros_nodes.robot_host import RobotHost, TickStats
+from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.core.bridge import Bridge
+from rosbridge.core.limits import ClientLimits, OriginPolicy
+from rosbridge.transport.front import ROBOTS_PREFIX, Destination, WebSocketFront
+from rosbridge.transport.schedule import Schedule
+
+
+class SimServer(WebSocketFront):
+    """The WebSocket front of one robot, at every path but ``/robots/...``.
+
+    Args:
+        robot: the virtual robot to run.
+        admin_token: the secret that grants admin rights (``?token=`` in the URL).
+        period_s: tick period (s).
+        limits: the bounds every client lives within.
+        origins: which web pages may connect; None: any (tests and benchmarks).
+    """
+
+    def __init__(self, robot: VirtualRobot, admin_token: str,
+                 period_s: float = TICK_PERIOD_S, limits: ClientLimits | None = None,
+                 origins: OriginPolicy | None = None) -> None:
+        super().__init__(admin_token, limits, origins)
+        self.host = RobotHost(robot, Schedule(period_s))
+
+    @property
+    def robot(self) -> VirtualRobot:
+        """The robot served."""
+        return self.host.robot
+
+    @property
+    def bridge(self) -> Bridge:
+        """The robot's bridge."""
+        return self.host.bridge
+
+    @property
+    def stats(self) -> TickStats:
+        """The robot's tick statistics."""
+        return self.host.stats
+
+    def route(self, path: str) -> tuple[Destination, str | None] | str:
+        """The one robot, whatever the path (a proxy may pass its own), but ``/robots/...``."""
+        if path.startswith(ROBOTS_PREFIX):
+            return "this server runs one robot, not a class: connect to ws://HOST:PORT/"
+        return self.host, None
+
+    async def run_ticks(self) -> None:
+        """Run the robot's tick loop forever."""
+        await self.host.run_ticks()
+
+    def health(self) -> dict[str, Any]:
+        """A small status report: uptime, the robot's ticks, jitter, clients and faults."""
+        return {**self.host.health(), "uptime_s": self._uptime_s()}

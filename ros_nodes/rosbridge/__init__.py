@@ -1,1 +1,0 @@
-"""The embedded rosbridge v2 server: protocol (Sans-I/O), encodings, services, server."""

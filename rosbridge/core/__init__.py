@@ -1,0 +1,1 @@
+"""The rosbridge v2 protocol without I/O: frames in, frames out for the transport to write."""

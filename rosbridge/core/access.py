@@ -1,0 +1,96 @@
+"""What a rosbridge client may do, in one place: the topic, service and action allow-list.
+
+The bridge asks ``check`` before every operation that names a topic, service or action; the
+one other access rule, admin rights for changing parameters, is ``services.require_admin``.
+
+Every client (student or admin) may:
+
+* subscribe to any topic: the robot's, other clients', and with ``--ros`` the ROS graph's;
+* publish ``/cmd_vel`` and topics of its own (relayed to other clients, and with ``--ros`` to
+  the graph), but not the simulator's outputs (``/odom``, ``/scan``, ``/tf``...; refused by the
+  bridge) nor ROS infrastructure topics (``/rosout``, ``/parameter_events``);
+* call any service (changing parameters then needs the admin token), and offer services of its
+  own, but not in the simulator's namespaces (``/virtual_robot/``, ``/rosapi/``,
+  ``/websim/``);
+* send goals to any action, and offer actions of its own, outside those namespaces too.
+
+Names are resolved and checked once, before this (``rosbridge.schema.resolve_name``), and one
+client may hold at most ``ClientLimits.max_subscriptions`` subscriptions, ``max_advertised``
+advertised topics, ``max_services`` services and ``max_actions`` actions, so that one
+connection cannot grow the server's tables without bound.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, Protocol
+
+from rosbridge.core.limits import ClientLimits
+
+RESERVED_TOPICS = frozenset({"/rosout", "/parameter_events"})
+"""ROS infrastructure topics clients may not publish."""
+
+RESERVED_SERVICE_PREFIXES = ("/virtual_robot/", "/rosapi/", "/websim/")
+"""Namespaces of the simulator's own nodes; clients may not offer services or actions in
+them."""
+
+
+class AccessError(Exception):
+    """An operation the allow-list refuses; the message is the reason sent back."""
+
+
+class Holder(Protocol):
+    """What ``check`` needs to know of a client: what it holds already, and its limits."""
+
+    @property
+    def subscriptions(self) -> Mapping[str, Any]:
+        """Topics it subscribes to."""
+
+    @property
+    def advertised(self) -> Mapping[str, Any]:
+        """Topics it advertises."""
+
+    @property
+    def services(self) -> Mapping[str, Any]:
+        """Services it offers."""
+
+    @property
+    def actions(self) -> Mapping[str, Any]:
+        """Actions it offers."""
+
+    @property
+    def limits(self) -> ClientLimits:
+        """The bounds it lives within."""
+
+
+def check(client: Holder, op: str, name: str) -> None:
+    """Raise ``AccessError`` unless ``client`` may do ``op`` on the topic, service or action.
+
+    ``name`` is already resolved (``schema.resolve_name``). Operations that only give
+    something up (``unsubscribe``, ``unadvertise``...) are always allowed. Topics the
+    simulator publishes are refused by the bridge, which knows who owns them.
+    """
+    limits = client.limits
+    if op == "subscribe":
+        _within(client.subscriptions, name, limits.max_subscriptions, "subscriptions")
+    elif op in ("advertise", "publish"):
+        if name in RESERVED_TOPICS:
+            raise AccessError(f"{name} is a ROS infrastructure topic; clients cannot "
+                              "publish it")
+        if op == "advertise":
+            _within(client.advertised, name, limits.max_advertised, "advertised topics")
+    elif op == "advertise_service":
+        if name.startswith(RESERVED_SERVICE_PREFIXES):
+            raise AccessError(f"{name}: services under {', '.join(RESERVED_SERVICE_PREFIXES)} "
+                              "belong to the simulator")
+        _within(client.services, name, limits.max_services, "services")
+    elif op == "advertise_action":
+        if name.startswith(RESERVED_SERVICE_PREFIXES):
+            raise AccessError(f"{name}: actions under {', '.join(RESERVED_SERVICE_PREFIXES)} "
+                              "belong to the simulator")
+        _within(client.actions, name, limits.max_actions, "actions")
+
+
+def _within(held: Mapping[str, Any], name: str, limit: int, what: str) -> None:
+    if name not in held and len(held) >= limit:
+        raise AccessError(f"{name}: a client may hold at most {limit} {what}")

@@ -1,0 +1,424 @@
+"""Topics: advertise, unadvertise, publish, subscribe, unsubscribe; throttles, queues, latching.
+
+The one path for every message: a client's ``publish`` and an in-process endpoint's
+(``publish``, e.g. the robot's /odom) both go through ``_deliver``, and in-process subscribers
+(``subscribe_local``, e.g. the robot's /cmd_vel) get what clients publish, as another client
+would. Every message is relayed in its canonical form (``message_types``: defaults filled,
+unknown fields refused); a type websim cannot check (not among its definitions, nor with
+``--ros`` importable) is refused at advertise, subscribe and publish, as rosbridge refuses a
+type it cannot import.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Collection
+from typing import TYPE_CHECKING, Any
+
+from rosbridge.core.encoding import cbor_raw_frame, png_frame, to_cbor, to_json
+from rosbridge.core.errors import BridgeError
+from rosbridge.core.fragments import fragment
+from rosbridge.core.outbox import Frames
+from rosbridge.core.session import Session, Subscription
+from rosbridge.msgs import cdr
+from rosbridge.msgs import definitions as message_types
+from rosbridge.msgs.values import normalize_type
+
+if TYPE_CHECKING:
+    from rosbridge.core.bridge import Bridge
+
+log = logging.getLogger("websim.bridge")
+
+THROTTLE_JITTER_S = 0.005
+"""What a throttle tolerates: ``throttle_rate`` is the least time between two messages
+(rosbridge's definition), less this. The robot's messages are timed at their tick's due time
+(``publish_many``), so a 200 ms throttle on the 20 Hz /odom gives exactly every fourth however
+late ticks run; this covers rounding, and clients' messages timed on arrival."""
+
+CLOSING_LOOP_S = 1.0
+"""A client that published within this long closes a loop (a teleop page, a PID node): in
+every fan-out its frame is queued first and written at once (``Outbox.send_now``), before
+the message is queued for the clients that only watch. With 500 watchers, queueing and
+writing for all of them takes milliseconds; the driver's /odom does not wait for that
+(benchmarks/bench_server.py)."""
+
+LocalSubscriber = Callable[[Any, Session], None]
+"""An in-process subscriber: called with a client's (canonical) message and its publisher.
+It raises one of ``Bridge.refusals`` to refuse the message; the reason goes back to the
+publisher."""
+
+
+class Encoded:
+    """One publish envelope, encoded at most once per format whatever the subscriber count.
+
+    A format is a compression (``schema.COMPRESSIONS``) and, for the JSON ones (``none``,
+    ``png``), a ``fragment_size``: a longer text goes as its ``fragment`` frames.
+    """
+
+    def __init__(self, topic: str, msg: Any) -> None:
+        self.topic = topic
+        self.envelope = {"op": "publish", "topic": topic, "msg": msg}
+        self._json: str | None = None
+        self._frames: dict[tuple[str, int | None], Frames] = {}
+
+    def frame(self, compression: str, fragment_size: int | None = None,
+              type_name: str | None = None) -> Frames:
+        """The frames for subscribers that asked for ``compression`` and ``fragment_size``.
+
+        ``type_name``: the topic's type, for ``cbor-raw``; a message that cannot be
+        serialized gets an error ``status`` frame in its place.
+
+        Raises:
+            ValueError: the message cannot be written in this format at all.
+        """
+        binary = compression in ("cbor", "cbor-raw")
+        key = (compression, None if binary else fragment_size)
+        frames = self._frames.get(key)
+        if frames is None:
+            frames = self._frames[key] = self._encode(compression, fragment_size, type_name)
+        return frames
+
+    def _encode(self, compression: str, fragment_size: int | None,
+                type_name: str | None) -> Frames:
+        if compression == "cbor":
+            return to_cbor(self.envelope)
+        if compression == "cbor-raw":
+            return self._cbor_raw(type_name)
+        if self._json is None:
+            self._json = to_json(self.envelope)
+        text = png_frame(self._json) if compression == "png" else self._json
+        if fragment_size is not None and len(text) > fragment_size:
+            return fragment(text, fragment_size)
+        return text
+
+    def _cbor_raw(self, type_name: str | None) -> Frames:
+        try:
+            if type_name is None:
+                raise cdr.CdrError("its type is not known yet")
+            data = cdr.to_cdr(type_name, self.envelope["msg"])
+        except cdr.CdrError as error:
+            return to_json({"op": "status", "level": "error",
+                            "msg": f"cbor-raw: a message on {self.topic} cannot be sent as "
+                                   f"CDR: {error}"})
+        return cbor_raw_frame(self.topic, data, time.time())
+
+
+class Topics:
+    """The topic capability of one bridge.
+
+    Args:
+        bridge: the bridge it belongs to (sessions, clock, errors, the graph relay).
+    """
+
+    OPS = ("advertise", "unadvertise", "publish", "subscribe", "unsubscribe")
+
+    def __init__(self, bridge: Bridge) -> None:
+        self._bridge = bridge
+        self._types: dict[str, str] = {}
+        self._owned: set[str] = set()
+        self._subscribers: dict[str, set[Session]] = {}
+        self._local: dict[str, list[LocalSubscriber]] = {}
+        self._latched: dict[str, Encoded] = {}
+        self._subscribed_types: dict[str, str] = {}
+        """Types named by subscriptions to topics of no other known type (rosbridge infers
+        a publisher's type from them); dropped with the last subscriber."""
+        self._latching: set[tuple[Session, str]] = set()
+        """(client, topic) advertised with ``latch: true``: its every publish is latched."""
+        self._published_s: dict[Session, float] = {}
+        """When each client last published (monotonic s): the fan-out serves them first."""
+        message_types.load()  # now, not at the first publish (it takes ~0.1 s)
+
+    def handlers(self) -> dict[str, Callable[[Session, dict[str, Any]], None]]:
+        """This capability's ops."""
+        return {"advertise": self._advertise, "unadvertise": self._unadvertise,
+                "publish": self._publish, "subscribe": self._subscribe,
+                "unsubscribe": self._unsubscribe}
+
+    # ---- in-process endpoints ---------------------------------------------------------------
+
+    def own(self, topic: str, type_name: str) -> None:
+        """Declare ``topic`` published in-process (the robot's outputs): clients may not."""
+        self._types[topic] = normalize_type(type_name)
+        self._owned.add(topic)
+
+    def subscribe_local(self, topic: str, type_name: str, callback: LocalSubscriber) -> None:
+        """Give ``callback`` every message clients publish on ``topic`` (of ``type_name``)."""
+        self._types[topic] = normalize_type(type_name)
+        self._local.setdefault(topic, []).append(callback)
+
+    def publish(self, topic: str, msg: Any, latch: bool = False) -> None:
+        """Send an in-process message (the robot's, the ROS graph's) to ``topic``'s clients."""
+        encoded = Encoded(topic, msg)
+        if latch:
+            self._latched[topic] = encoded
+        self._deliver([encoded])
+
+    def publish_many(self, messages: list[tuple[str, Any]],
+                     tick_s: float | None = None) -> None:
+        """Send several in-process messages (one tick's) to their clients, not latched.
+
+        A client gets all of its messages of the tick in one write. ``tick_s``: when the
+        tick was due (monotonic s), the time throttles measure against, so a tick that runs
+        late does not make a throttled client miss its message.
+        """
+        self._deliver([Encoded(topic, msg) for topic, msg in messages], tick_s)
+
+    def has_subscribers(self, topic: str) -> bool:
+        """Whether any client subscribes to ``topic``."""
+        return bool(self._subscribers.get(topic))
+
+    def types(self) -> dict[str, str]:
+        """Every topic known here and its type."""
+        return dict(self._types)
+
+    def subscribed_topics(self) -> Collection[str]:
+        """Topics some client subscribes to (a live view: do not keep it)."""
+        return self._subscribers.keys()
+
+    def owned(self) -> frozenset[str]:
+        """Topics only in-process endpoints publish."""
+        return frozenset(self._owned)
+
+    def disconnect(self, session: Session) -> None:
+        """Drop every subscription and advertisement of ``session``."""
+        for topic in list(session.subscriptions):
+            self._drop_subscription(session, topic)
+        for topic in list(session.advertised):
+            self._drop_advertisement(session, topic)
+        self._published_s.pop(session, None)
+
+    # ---- advertise ------------------------------------------------------------------------
+
+    def _known_type(self, topic: str, type_name: str) -> str:
+        """Check ``type_name`` against what ``topic`` is known to carry; return it normalised."""
+        try:
+            normalized = normalize_type(type_name)
+        except ValueError as error:
+            raise BridgeError(f"{topic}: {error}") from None
+        known = self._types.get(topic)
+        if known is not None and known != normalized:
+            raise BridgeError(f"{topic} carries {known}, not {normalized}")
+        return normalized
+
+    def _refuse_owned(self, topic: str) -> None:
+        if topic in self._owned:
+            raise BridgeError(f"{topic} is published by the simulator; clients cannot "
+                              "publish it")
+
+    def _advertise(self, session: Session, message: dict[str, Any]) -> None:
+        topic = message["topic"]
+        self._refuse_owned(topic)
+        type_name = self._known_type(topic, message["type"])
+        try:
+            message_types.check_type(type_name, graph=self._bridge.graph.attached)
+        except self._bridge.refusals as error:
+            raise BridgeError(f"advertise {topic}: {error}") from None
+        self._types[topic] = type_name
+        session.advertised.setdefault(topic, {})[message.get("id")] = type_name
+        if message.get("latch"):
+            self._latching.add((session, topic))
+        self._bridge.graph.advertise(session, topic, type_name)
+
+    def _unadvertise(self, session: Session, message: dict[str, Any]) -> None:
+        topic = message["topic"]
+        ids = session.advertised.get(topic)
+        if ids is None or message.get("id") not in ids:
+            return  # rosbridge: an id that holds nothing releases nothing
+        del ids[message.get("id")]
+        if not ids:  # the last id held it (rosbridge counts per id)
+            self._drop_advertisement(session, topic)
+
+    def _drop_advertisement(self, session: Session, topic: str) -> None:
+        if session.advertised.pop(topic, None) is None:
+            return
+        self._latching.discard((session, topic))
+        still_used = topic in self._owned or topic in self._local or any(
+            topic in other.advertised for other in self._bridge.sessions)
+        if not still_used:
+            self._types.pop(topic, None)
+            self._latched.pop(topic, None)
+        if not any(topic in other.advertised for other in self._bridge.sessions):
+            self._bridge.graph.unadvertise(topic)
+
+    # ---- publish --------------------------------------------------------------------------
+
+    def _publish(self, session: Session, message: dict[str, Any]) -> None:
+        topic = message["topic"]
+        self._refuse_owned(topic)
+        ids = session.advertised.get(topic)
+        type_name = next(iter(ids.values())) if ids else self._inferred_type(topic)
+        if type_name is None:
+            raise BridgeError(f"Cannot infer topic type for topic {topic} as it is not yet "
+                              "advertised (advertise it with its type first)")
+        msg = message["msg"]
+        try:
+            msg = message_types.canonical(type_name, msg, graph=self._bridge.graph.attached)
+        except self._bridge.refusals as error:
+            raise BridgeError(f"publish to {topic}: {error}") from None
+        size = session.frame_bytes  # what arrived: known before anything is encoded
+        latch = bool(message.get("latch")) or (session, topic) in self._latching
+        if latch and size > session.limits.max_latched_bytes:
+            raise BridgeError(f"publish to {topic}: a latched message may be at most "
+                              f"{session.limits.max_latched_bytes} bytes, this one is {size}")
+        if not session.relay_budget.take(size):
+            raise BridgeError(f"publish to {topic}: more than "
+                              f"{session.limits.relay_bytes_per_s} bytes/s published; "
+                              "message dropped")
+        for callback in self._local.get(topic, ()):
+            try:
+                callback(msg, session)
+            except self._bridge.refusals as error:
+                raise BridgeError(f"{topic}: {error}") from None
+        self._published_s[session] = self._bridge.clock()
+        encoded = Encoded(topic, msg)
+        if latch:
+            self._latched[topic] = encoded
+        self._deliver([encoded])
+        self._bridge.graph.publish(session, topic, type_name, msg)
+
+    def _inferred_type(self, topic: str) -> str | None:
+        """A publish without advertise: the type ``topic`` is known to carry (rosbridge).
+
+        Known from the simulator, another client's advertisement or subscription, or the
+        ROS graph.
+        """
+        known = self._type_of(topic)
+        if known is None:
+            known = self._bridge.graph.topic_types().get(topic)
+        return known
+
+    def _type_of(self, topic: str) -> str | None:
+        """The type ``topic`` is known to carry here (not asking the graph)."""
+        return self._types.get(topic) or self._subscribed_types.get(topic)
+
+    def _deliver(self, messages: list[Encoded], now_s: float | None = None) -> None:
+        """Queue ``messages`` (one tick's, or one client's publish) for their subscribers.
+
+        Clients closing a loop get all of them first, in one write (``send_now``); then the
+        clients that only watch, whose writes wait for the end of the tick. ``now_s``: the
+        time throttles measure against (default: the clock).
+        """
+        now = self._bridge.clock() if now_s is None else now_s
+        audiences = [(encoded, subscribers) for encoded in messages
+                     if (subscribers := self._subscribers.get(encoded.topic))]
+        if not audiences:
+            return
+        closing_loops = self._closing_loops(now)
+        unencodable: set[str] = set()
+        for session in closing_loops:
+            subscribed = False
+            for encoded, subscribers in audiences:
+                if session in subscribers and encoded.topic not in unencodable:
+                    subscribed = True
+                    if not self._queue(session, encoded, now):
+                        unencodable.add(encoded.topic)
+            if subscribed:
+                session.outbox.send_now()
+        for encoded, subscribers in audiences:
+            if encoded.topic in unencodable:
+                continue
+            for session in subscribers:
+                if session not in closing_loops and not self._queue(session, encoded, now):
+                    break
+
+    def _queue(self, session: Session, encoded: Encoded, now: float) -> bool:
+        """Queue ``encoded`` for ``session`` unless its throttle holds it back.
+
+        False: the message cannot be encoded at all (recorded; nobody gets it).
+        """
+        topic = encoded.topic
+        subscription = session.subscriptions[topic]
+        throttle_ms = subscription.throttle_in_force_ms
+        if throttle_ms > 0 and now - subscription.last_sent_s < \
+                throttle_ms / 1000.0 - THROTTLE_JITTER_S:
+            return True
+        subscription.last_sent_s = now
+        try:
+            frame = encoded.frame(subscription.compression, session.fragment_size,
+                                  self._type_of(topic))
+        except (TypeError, ValueError) as error:  # a message no encoder can write
+            self._bridge.faults.record(f"encoding {topic}", error)
+            return False
+        try:
+            session.outbox.put_topic(topic, frame, subscription.queue_in_force)
+        except Exception as error:  # one client's fault is not the others'
+            self._bridge.faults.record(f"delivering {topic}", error)
+        return True
+
+    def _closing_loops(self, now: float) -> dict[Session, None]:
+        """The clients that published within ``CLOSING_LOOP_S``, in order."""
+        if not self._published_s:
+            return {}
+        stale = [session for session, published_s in self._published_s.items()
+                 if now - published_s > CLOSING_LOOP_S]
+        for session in stale:
+            del self._published_s[session]
+        return dict.fromkeys(self._published_s)
+
+    # ---- subscribe ------------------------------------------------------------------------
+
+    def _subscribe(self, session: Session, message: dict[str, Any]) -> None:
+        topic = message["topic"]
+        named_type = None
+        if message.get("type"):
+            try:
+                named_type = self._known_type(topic, message["type"])
+                message_types.check_type(named_type, graph=self._bridge.graph.attached)
+            except self._bridge.refusals as error:
+                raise BridgeError(f"subscribe {topic}: {error}") from None
+        limits = session.limits
+        throttle_ms = float(message.get("throttle_rate", 0))  # ranges: schema.OP_FIELDS
+        queue_length = int(message.get("queue_length", 0))
+        subscription = session.subscriptions.get(topic)
+        sub_id = message.get("id")
+        if subscription is not None and sub_id not in subscription.throttle_ms \
+                and len(subscription.throttle_ms) >= limits.max_ids_per_topic:
+            raise BridgeError(f"subscribe {topic}: a client may hold at most "
+                              f"{limits.max_ids_per_topic} subscribe ids on one topic")
+        compression = message.get("compression", "none")
+        if compression == "cbor-raw":
+            self._check_cdr(topic)
+        if subscription is None:
+            subscription = session.subscriptions[topic] = Subscription()
+        subscription.add(sub_id, throttle_ms, queue_length, compression)
+        if named_type is not None and topic not in self._types:
+            self._subscribed_types.setdefault(topic, named_type)
+        self._subscribers.setdefault(topic, set()).add(session)
+        self._bridge.graph.subscribe(session, topic, message.get("type") or
+                                     self._types.get(topic))
+        latched = self._latched.get(topic)
+        if latched is not None:
+            _, length = subscription.effective()
+            frames = latched.frame(subscription.compression, session.fragment_size,
+                                   self._type_of(topic))
+            session.outbox.put_topic(topic, frames, length)
+
+    def _check_cdr(self, topic: str) -> None:
+        """Refuse ``cbor-raw`` on a topic whose known type cannot be serialized as CDR."""
+        type_name = self._type_of(topic)
+        if type_name is not None and not cdr.serializable(type_name):
+            raise BridgeError(f"subscribe {topic}: cbor-raw needs the message's CDR bytes, "
+                              f"and {type_name} is not a type websim can serialize; "
+                              "subscribe with compression 'cbor' or 'none'")
+
+    def _unsubscribe(self, session: Session, message: dict[str, Any]) -> None:
+        topic = message["topic"]
+        subscription = session.subscriptions.get(topic)
+        if subscription is None:
+            return
+        if "id" in message and message["id"] in subscription.throttle_ms \
+                and subscription.remove(message["id"]):
+            return
+        self._drop_subscription(session, topic)
+
+    def _drop_subscription(self, session: Session, topic: str) -> None:
+        session.subscriptions.pop(topic, None)
+        session.outbox.discard_topic(topic)
+        subscribers = self._subscribers.get(topic)
+        if subscribers is not None:
+            subscribers.discard(session)
+            if not subscribers:
+                del self._subscribers[topic]
+                self._subscribed_types.pop(topic, None)
+                self._bridge.graph.unsubscribe(topic)

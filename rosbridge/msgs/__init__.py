@@ -1,0 +1,1 @@
+"""ROS message values, definitions, checks and conversions: no protocol, no robot."""

@@ -1,0 +1,1 @@
+"""The rosbridge WebSocket server: front door, connections, tick schedule, wire frames."""

@@ -1,0 +1,253 @@
+"""One client's WebSocket connection: its session, reader, writer and watchdog."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import socket
+import time
+from typing import Protocol
+
+from websockets.asyncio.server import ServerConnection
+from websockets.exceptions import ConnectionClosed
+from websockets.protocol import State
+
+from rosbridge.core.limits import ClientLimits, RateLimit, TokenBucket
+from rosbridge.core.outbox import Frame, Outbox
+from rosbridge.core.session import Session
+from rosbridge.transport.schedule import Schedule
+from rosbridge.transport.wire import WireFrames
+
+log = logging.getLogger("websim.server")
+
+POLICY_VIOLATION = 1008
+"""WebSocket close code for a client that broke a rule (rate, unread queue, stalled)."""
+
+MAX_CLOSE_REASON_BYTES = 123
+"""The WebSocket protocol's limit on a close reason (RFC 6455, 5.5)."""
+
+WATCH_PERIOD_S = 0.5
+"""How often a client's watchdog checks that its socket still accepts data."""
+
+PROGRESS_BYTES = 4096
+"""What a socket must accept to count as read from: a stalled peer's TCP window still lets a
+few bytes through now and then (zero-window probes)."""
+
+LARGE_FRAME_BYTES = 64 << 10
+"""Frames this large wait for room before the next tick (``Schedule.room``)."""
+
+HANDLING_S_PER_BYTE = 10e-9
+"""A generous estimate of what handling an accepted frame costs: 10 ms per MiB (parsing,
+checking and canonical form measured at 3-5 ms per MiB on this project's machines)."""
+
+FLOOD_CLOSE_TIMEOUT_S = 0.5
+"""How long a client closed for flooding gets for the close handshake: its frames are no
+longer read, so its close frame would only arrive behind them; its buffers go at once."""
+
+WRITE_BUFFER_BYTES = 64 << 10
+"""What may wait in a client's transport buffer (beyond the kernel's) before its frames are
+written one at a time, each after the socket drained (websockets' ``send``)."""
+
+SEND_BUFFER_BYTES = 128 << 10
+"""Kernel send buffer per client (Linux doubles it). Autotuned, it grows to about 4 MB, which a
+client that stops reading fills at the stream's ~100 kB/s for most of a minute before its
+outbox (bounded, newest first) takes over: 100 such clients would pin 400 MB of kernel memory.
+128 KiB is still over a second of every topic, and a LAN's bandwidth-delay product."""
+
+
+class Hub(Protocol):
+    """What a connection's frames go to: a robot's ``Bridge``, or an instructor's view."""
+
+    def connect(self, session: Session) -> None:
+        """Register the client."""
+
+    def disconnect(self, session: Session) -> None:
+        """Forget the client and all it holds."""
+
+    def handle(self, session: Session, frame: Frame) -> None:
+        """Act on one frame of the client; never raises."""
+
+
+class BridgeConnection:
+    """One client's connection: its session, reader, writer and watchdog.
+
+    Args:
+        hub: what its frames go to: the bridge of the robot it talks to (or the instructor's
+            view of a class).
+        schedule: the tick schedule large frames make room in.
+        connection: its WebSocket.
+        peer: its address, for logs.
+        is_admin: whether it presented the admin token.
+        limits: the bounds it lives within.
+        wire: where its frames are serialized (shared with the clients of the same server,
+            so a message is framed once).
+    """
+
+    def __init__(self, hub: Hub, schedule: Schedule, connection: ServerConnection, peer: str,
+                 is_admin: bool, limits: ClientLimits, wire: WireFrames | None = None) -> None:
+        self._schedule = schedule
+        self._bridge = hub
+        self._connection = connection
+        self._peer = peer
+        self._limits = limits
+        self._wire = wire if wire is not None else WireFrames()
+        self._loop = asyncio.get_running_loop()
+        self._flush_due = False
+        self._backed_up = asyncio.Event()
+        outbox = Outbox(limits.max_queued_bytes, limits.max_replies, wake=self._wake,
+                        send=self._flush)
+        self.session = Session(peer, is_admin, outbox, limits=limits)
+        self._rate = RateLimit(limits.max_rate)
+        self._handling = TokenBucket(limits.handling_share, limits.handling_burst_s)
+        self._handed_bytes = 0
+        self._closing: asyncio.Task[None] | None = None
+
+    async def run(self) -> None:
+        """Register, read frames until the connection ends, and unregister in ``finally``."""
+        raw_socket = self._connection.transport.get_extra_info("socket")
+        if raw_socket is not None:
+            raw_socket.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
+        self._bridge.connect(self.session)
+        log.info("client %s connected%s", self._peer,
+                 " (admin)" if self.session.is_admin else "")
+        writer = asyncio.create_task(self._write())
+        try:
+            await self._read()
+        finally:
+            writer.cancel()
+            self._bridge.disconnect(self.session)
+            self.session.outbox.detach()
+            log.info("client %s disconnected", self._peer)
+            if self._closing is not None:
+                await asyncio.wait([self._closing])
+
+    async def _read(self) -> None:
+        try:
+            async for frame in self._connection:
+                if not self._rate.allow(len(frame)):
+                    self._close(POLICY_VIOLATION, self._rate.reason(), FLOOD_CLOSE_TIMEOUT_S)
+                    return  # its further frames are not even read: the close ends it
+                wait_s = self._handling.wait_s()
+                if wait_s > 0:  # its budget is spent: its frames wait, its socket backs up
+                    await asyncio.sleep(wait_s)
+                if len(frame) >= LARGE_FRAME_BYTES:  # handled between ticks, not across one
+                    await self._schedule.room(len(frame) * HANDLING_S_PER_BYTE)
+                started = time.perf_counter()
+                self._bridge.handle(self.session, frame)
+                self._handling.charge(time.perf_counter() - started)
+        except ConnectionClosed:
+            pass
+
+    def _wake(self) -> None:
+        """The outbox got a frame: flush it once the current callback (a tick) is done."""
+        if not self._flush_due:
+            self._flush_due = True
+            self._loop.call_soon(self._scheduled_flush)
+
+    def _scheduled_flush(self) -> None:
+        self._flush_due = False
+        self._flush()
+
+    def _flush(self) -> None:
+        """Write what waits in the outbox onto the socket, in one write, without waiting.
+
+        Scheduled after the callback that queued a frame (``_wake``: a tick's frames go out
+        together), or called at once (``Outbox.send_now``: a client closing a loop).
+
+        Every frame goes out as its serialized bytes (``WireFrames``: framed once for all
+        subscribers); nothing else of websockets runs per frame. Past ``WRITE_BUFFER_BYTES``
+        in the transport's buffer the client is behind: the writer task takes over, through
+        websockets' ``send``, which waits for the socket to drain.
+        """
+        outbox = self.session.outbox
+        if outbox.overflowed is not None or self._closing is not None:
+            self._backed_up.set()  # the writer closes it
+            return
+        if self._backed_up.is_set() or self._connection.protocol.state is not State.OPEN:
+            return
+        transport = self._connection.transport
+        room = WRITE_BUFFER_BYTES - transport.get_write_buffer_size()
+        if room > 0:
+            wire = self._wire.of
+            chunks = [wire(frame) for frame in outbox.take(room)]
+            if chunks:
+                data = b"".join(chunks) if len(chunks) > 1 else chunks[0]
+                self._handed_bytes += len(data)
+                transport.write(data)
+        if len(outbox) > 0 or outbox.overflowed is not None:
+            outbox.behind = True
+            self._backed_up.set()
+
+    async def _write(self) -> None:
+        """Serve a client that is behind: one frame at a time, waiting for its socket.
+
+        Only while it is behind does a watchdog look at its socket (``_watch``): a client
+        that keeps up has nothing waiting beyond ``WRITE_BUFFER_BYTES``.
+        """
+        outbox = self.session.outbox
+        try:
+            while True:
+                await self._backed_up.wait()
+                watchdog = asyncio.create_task(self._watch())
+                try:
+                    while outbox.overflowed is None and (frame := outbox.pop()) is not None:
+                        self._handed_bytes += len(frame)
+                        await self._connection.send(frame)  # waits while the socket is full
+                finally:
+                    watchdog.cancel()
+                if outbox.overflowed is not None:
+                    self._close(POLICY_VIOLATION, outbox.overflowed)
+                    return
+                outbox.behind = False
+                self._backed_up.clear()  # caught up: back to flushing after each tick
+        except ConnectionClosed:
+            pass
+
+    async def _watch(self) -> None:
+        """Close the client if it lets too much pile up, or its socket stops accepting.
+
+        An overflowed outbox is checked here too, since the writer may be blocked in
+        ``send``; a socket that accepts (next to) nothing for ``stall_timeout_s`` while
+        frames wait is a client that does not read.
+        """
+        loop = asyncio.get_running_loop()
+        transport = self._connection.transport
+        baseline = 0
+        progress_s = loop.time()
+        while True:
+            await asyncio.sleep(WATCH_PERIOD_S)
+            if self.session.outbox.overflowed is not None:  # the writer may be stuck in send
+                self._close(POLICY_VIOLATION, self.session.outbox.overflowed)
+                return
+            buffered = transport.get_write_buffer_size()
+            accepted = self._handed_bytes - buffered  # what the kernel took so far
+            waiting = buffered > 0 or len(self.session.outbox) > 0
+            if not waiting or accepted - baseline >= PROGRESS_BYTES:
+                baseline, progress_s = accepted, loop.time()
+                continue
+            stalled_s = loop.time() - progress_s
+            if stalled_s >= self._limits.stall_timeout_s:
+                self._close(POLICY_VIOLATION, f"not reading: the socket accepted nothing for "
+                                              f"{stalled_s:.0f} s")
+                return
+
+    def _close(self, code: int, reason: str, timeout_s: float | None = None) -> None:
+        """Start closing with ``code`` and ``reason``; abort the transport if that stalls.
+
+        ``timeout_s``: how long the close handshake may take (default
+        ``limits.close_timeout_s``).
+        """
+        if self._closing is not None:
+            return
+        log.warning("client %s: %s; disconnecting it", self._peer, reason)
+        self._closing = asyncio.create_task(self._close_or_abort(
+            code, reason, self._limits.close_timeout_s if timeout_s is None else timeout_s))
+
+    async def _close_or_abort(self, code: int, reason: str, timeout_s: float) -> None:
+        shortened = reason.encode()[:MAX_CLOSE_REASON_BYTES].decode(errors="ignore")
+        try:
+            await asyncio.wait_for(self._connection.close(code, shortened), timeout_s)
+        except TimeoutError:
+            log.warning("client %s: the close handshake could not be written; aborting",
+                        self._peer)
+            self._connection.transport.abort()

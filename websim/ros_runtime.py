@@ -1,0 +1,162 @@
+"""``websim serve --ros``: rclpy inside the server, the robots' nodes and the bridge's relay.
+
+Threads: the asyncio event loop of ``websim serve`` owns the simulation and the bridge, as
+without ROS; its tick loop stays the one clock, and each tick's messages go to the browser and,
+through ``VirtualRobotNode.publish`` (rclpy publishers are thread-safe), onto the ROS graph.
+rclpy has no asyncio executor, so a ``SingleThreadedExecutor`` spins in one background thread;
+everything its callbacks do to the robot or the bridge is handed to the loop
+(``LoopAccess``), and whatever needs an answer (a parameter change, a reset) waits for it
+there.
+
+Two nodes share one rclpy ``Context`` (no global state; rclpy's signal handlers stay off, the
+server handles SIGINT and SIGTERM): ``virtual_robot`` and ``rosbridge_websocket``, the relay
+(``rosbridge.graph.relay``), as a real rosbridge deployment names them.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import threading
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from ros_nodes.virtual_robot import VirtualRobotNode
+from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.core.bridge import Bridge
+from rosbridge.graph.actions import RosActions
+from rosbridge.graph.relay import RELAY_NODE_NAME, GraphRelay, LoopAccess
+from rosbridge.graph.services import GraphServices
+from rosbridge.msgs.values import Message
+
+
+def spin_until_shutdown(executor: SingleThreadedExecutor, context: Context) -> None:
+    """Spin ``executor`` until its context shuts down (the executor thread's body)."""
+    try:
+        executor.spin()
+    except ExternalShutdownException:
+        pass
+    except RuntimeError:
+        if context.ok():
+            raise
+        # rclpy can fail taking a message whose entity the shutdown destroyed mid-take.
+
+
+class RosRuntime:
+    """rclpy inside ``websim serve``: a context, the two nodes and the executor thread.
+
+    Build it on the event loop's thread (``start``), stop it before the loop ends.
+
+    Args:
+        robot: the robot the server ticks.
+        bridge: the server's bridge, which gets the relay attached.
+        loop: the server's event loop.
+    """
+
+    def __init__(self, robot: VirtualRobot, bridge: Bridge,
+                 loop: asyncio.AbstractEventLoop) -> None:
+        self._bridge = bridge
+        self.context = Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        try:
+            self.robot_node = VirtualRobotNode(robot, access=LoopAccess(loop), own_timer=False,
+                                               ignore_cmd_vel_from=RELAY_NODE_NAME,
+                                               context=self.context)
+            self.relay_node = Node(RELAY_NODE_NAME, context=self.context)
+        except BaseException:
+            self.context.try_shutdown()
+            raise
+
+        def deliver(topic: str, msg: Message, latched: bool) -> None:
+            with contextlib.suppress(RuntimeError):  # the loop closed while shutting down
+                loop.call_soon_threadsafe(bridge.publish, topic, msg, latched)
+
+        self.relay = GraphRelay(self.relay_node, deliver)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.relay.services = GraphServices(self.relay_node, self.executor, loop)
+        self.executor.add_node(self.robot_node)
+        self.executor.add_node(self.relay_node)
+        self.actions = RosActions(self.relay_node, LoopAccess(loop).post, loop.call_later,
+                                  self.executor)
+        self._thread = threading.Thread(target=self._spin, name="rclpy-executor", daemon=True)
+
+    def start(self) -> None:
+        """Spin the executor and relay the bridge's topics and actions from now on."""
+        self._thread.start()
+        self._bridge.graph.attach(self.relay)
+        self._bridge.actions.attach(self.actions)
+
+    def _spin(self) -> None:
+        spin_until_shutdown(self.executor, self.context)
+
+    def poll(self) -> None:
+        """Let subscriptions to graph topics nobody publishes yet start (``relay.poll``)."""
+        self.relay.poll()
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Detach from the bridge, stop the executor and destroy the nodes."""
+        self._bridge.graph.attach(None)
+        self._bridge.actions.attach(None)
+        self.executor.shutdown(timeout_sec=timeout_s)
+        self.robot_node.destroy_node()
+        self.relay_node.destroy_node()
+        self.context.try_shutdown()
+        self._thread.join(timeout_s)
+
+
+class ClassRosRuntime:
+    """rclpy inside ``websim serve --class --ros``: a ``virtual_robot`` node per robot.
+
+    Robot NAME's node is ``/NAME/virtual_robot``, its topics and services under ``/NAME``
+    (``/alice/cmd_vel``, ``/alice/odom``, ``/alice/reset_simulation``) and its frames
+    prefixed (``alice/odom``, ``alice/base_link``, ``alice/laser``), as multi-robot ROS 2
+    stacks name them, so a student's node runs with ``--ros-args -r __ns:=/alice``. The
+    browsers' rosbridge topics are not relayed to the graph in a class (each robot's page
+    talks to its bridge; the graph talks to its node).
+
+    Args:
+        robots: (name, robot) of every robot of the class.
+        loop: the server's event loop.
+    """
+
+    def __init__(self, robots: list[tuple[str, VirtualRobot]],
+                 loop: asyncio.AbstractEventLoop) -> None:
+        self.context = Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.nodes: list[VirtualRobotNode] = []
+        try:
+            for name, robot in robots:
+                self.nodes.append(VirtualRobotNode(
+                    robot, access=LoopAccess(loop), own_timer=False, frame_prefix=f"{name}/",
+                    namespace=f"/{name}", context=self.context))
+        except BaseException:
+            for node in self.nodes:
+                node.destroy_node()
+            self.context.try_shutdown()
+            raise
+        self.executor = SingleThreadedExecutor(context=self.context)
+        for node in self.nodes:
+            self.executor.add_node(node)
+        self._thread = threading.Thread(target=self._spin, name="rclpy-executor", daemon=True)
+
+    def start(self) -> None:
+        """Spin the executor."""
+        self._thread.start()
+
+    def poll(self) -> None:
+        """Nothing waits for graph topics here (no relay in a class)."""
+
+    def _spin(self) -> None:
+        spin_until_shutdown(self.executor, self.context)
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Stop the executor and destroy the nodes."""
+        self.executor.shutdown(timeout_sec=timeout_s)
+        for node in self.nodes:
+            node.destroy_node()
+        self.context.try_shutdown()
+        self._thread.join(timeout_s)
