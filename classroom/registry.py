@@ -26,6 +26,7 @@ from physics import TICK_PERIOD_S, ConfigError
 from physics.simulation import cast_scans
 from ros_nodes.robot_host import RobotHost
 from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.core.clock import Clock, WallClock
 from rosbridge.transport.schedule import Schedule
 
 ROBOT_NAME = re.compile(r"[a-z0-9_-]{1,32}")
@@ -141,14 +142,18 @@ class Classroom:
         make_token: makes robot NAME's token when the roster gives none (default: random).
         lazy: create a robot on its first ``get`` rather than at start (a worker of a class
             spread over several processes hosts only the robots routed to it).
+        clock: the class's clock (the one its robots are made with): its monotonic time
+            places the groups' ticks within a period. Default: wall time.
     """
 
     def __init__(self, roster: list[Student], make_robot: Callable[[Student], VirtualRobot],
                  schedule: Schedule | None = None, *, open_class: bool = False,
                  max_robots: int = DEFAULT_MAX_ROBOTS,
                  idle_pause_s: float | None = DEFAULT_IDLE_PAUSE_S,
-                 make_token: Callable[[str], str] | None = None, lazy: bool = False) -> None:
+                 make_token: Callable[[str], str] | None = None, lazy: bool = False,
+                 clock: Clock | None = None) -> None:
         self.schedule = schedule or Schedule(TICK_PERIOD_S)
+        self._clock: Clock = WallClock() if clock is None else clock
         self.open_class = open_class
         self.max_robots = max(max_robots, len(roster))
         self._make_robot = make_robot
@@ -220,21 +225,26 @@ class Classroom:
         if not hosts:
             return
         loop = asyncio.get_running_loop()
-        now = loop.time()
+        now_s = self._clock.monotonic_s()
         slots = min(SLOTS, len(hosts))
         slot_s = SPREAD * self.schedule.period_s / slots
         groups = [hosts[index::slots] for index in range(slots)]
-        self._tick_group(groups[0], now, lateness_s)
+        self._tick_group(groups[0], now_s, lateness_s)
         for index, group in enumerate(groups[1:], start=1):
-            due_s = now + index * slot_s
             # One loop turn later: a /cmd_vel that arrived with the timer is applied first
             # (its reader was woken by the same poll, and runs before what call_soon adds).
-            loop.call_at(due_s, loop.call_soon, self._tick_group, group, due_s, lateness_s)
+            loop.call_later(index * slot_s, loop.call_soon, self._tick_group, group,
+                            now_s + index * slot_s, lateness_s)
 
-    @staticmethod
-    def _tick_group(hosts: list[RobotHost], due_s: float, lateness_s: float) -> None:
-        """Advance a group's robots, cast their scans together, then deliver each's tick."""
-        late_s = lateness_s + max(0.0, asyncio.get_running_loop().time() - due_s)
+    def _tick_group(self, hosts: list[RobotHost], due_s: float, lateness_s: float) -> None:
+        """Advance a group's robots, cast their scans together, then deliver each's tick.
+
+        Args:
+            hosts: the group's robots.
+            due_s: when the group was due (the class clock's monotonic s).
+            lateness_s: how late the period's tick started (s).
+        """
+        late_s = lateness_s + max(0.0, self._clock.monotonic_s() - due_s)
         advanced = [host for host in hosts if host.begin_tick(late_s)]
         scanning = [host for host in advanced if host.scan_due(late_s)]
         if len(scanning) > 1:

@@ -8,7 +8,6 @@ the bridge's service capability.
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 from physics import ConfigError
@@ -29,7 +28,7 @@ class RobotEndpoint:
     Attributes:
         last_driver: the address of the client whose /cmd_vel the robot took last (None: none
             yet).
-        last_drive_s: when it did (monotonic s), None before.
+        last_drive_s: when it did (the robot's ``clock.monotonic_s``), None before.
         log: the robot node's /rosout and /parameter_events.
     """
 
@@ -52,7 +51,7 @@ class RobotEndpoint:
             self.log.warning(f"/cmd_vel refused: {error}")
             raise
         self.last_driver = publisher.peer
-        self.last_drive_s = time.monotonic()
+        self.last_drive_s = self.robot.clock.monotonic_s()
 
     def publish(self, publications: list[Publication]) -> None:
         """Send one tick's messages to the subscribers."""

@@ -14,9 +14,8 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from collections import deque
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -82,15 +81,18 @@ class RobotHost:
         schedule: the tick schedule it follows (default: one of its own).
         idle_pause_s: stop ticking (keeping the state) once nobody has been connected for
             this long; the next connection resumes it. None: never pause.
-        clock: monotonic clock (s), for the idle time and the bridge's throttles.
+
+    The robot's clock (``robot.clock``) is the host's: its monotonic time measures the idle
+    time, the bridge's throttles and timeouts and the last command's age.
     """
 
     def __init__(self, robot: VirtualRobot, schedule: Schedule | None = None,
-                 idle_pause_s: float | None = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 idle_pause_s: float | None = None) -> None:
         self.robot = robot
         self.faults = Faults()
-        self.bridge = Bridge(clock=clock, faults=self.faults, refusals=(ConfigError,))
+        clock = robot.clock
+        self.bridge = Bridge(clock=clock.monotonic_s, faults=self.faults,
+                             refusals=(ConfigError,))
         self.endpoint = RobotEndpoint(self.bridge, robot)
         self.stats = TickStats()
         self.schedule = schedule or Schedule(TICK_PERIOD_S)
@@ -100,7 +102,7 @@ class RobotHost:
         """Cast the LiDAR whether or not a client subscribes (a ROS node publishes it)."""
         self._idle_pause_s = idle_pause_s
         self._clock = clock
-        self._last_client_s = clock()
+        self._last_client_s = clock.monotonic_s()
         self.bridge.services.add(STATUS_SERVICE, "websim/srv/RobotStatus", self._status)
         self.bridge.services.add(PAUSE_SERVICE, "websim/srv/Pause", self._pause)
         sim = robot.sim
@@ -113,10 +115,10 @@ class RobotHost:
     def _idle(self) -> bool:
         """Whether the robot should pause: nobody connected for ``idle_pause_s``."""
         if self.bridge.sessions:
-            self._last_client_s = self._clock()
+            self._last_client_s = self._clock.monotonic_s()
             return False
         return self._idle_pause_s is not None and \
-            self._clock() - self._last_client_s >= self._idle_pause_s
+            self._clock.monotonic_s() - self._last_client_s >= self._idle_pause_s
 
     def tick(self, lateness_s: float = 0.0) -> None:
         """One tick: step the robot, deliver its messages, expire service calls; never raises.
@@ -179,7 +181,7 @@ class RobotHost:
                 self.stats.scans_cast += 1
             messages.append((spec.name, msg))
         try:  # throttles count from when the tick was due: a late tick is no shorter gap
-            self.bridge.publish_many(messages, self.bridge.clock() - lateness_s)
+            self.bridge.publish_many(messages, self._clock.monotonic_s() - lateness_s)
         except Exception as error:  # the robot's boundary: record, go on
             self.faults.record(f"delivering {', '.join(name for name, _ in messages)}", error)
         try:
@@ -214,7 +216,7 @@ class RobotHost:
                         for other in sorted(self.bridge.sessions, key=lambda s: s.peer)],
             "last_driver": self.endpoint.last_driver,
             "last_drive_age_s": None if drive_s is None
-            else round(time.monotonic() - drive_s, 3),
+            else round(self._clock.monotonic_s() - drive_s, 3),
             "collisions": self.robot.collisions,
             "mode": self.robot.sim.mode,
             "mass_kg": params.mass_kg,

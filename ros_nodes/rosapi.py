@@ -140,7 +140,7 @@ def add_rosapi(bridge: Bridge, robot: VirtualRobot) -> None:
     handlers = _graph_handlers(bridge)
     handlers.update(_type_handlers(bridge))
     handlers.update(_param_handlers(params, lambda: bridge.graph.nodes().keys()))
-    handlers["get_time"] = lambda args, session: {"time": stamp(robot.clock())}
+    handlers["get_time"] = lambda args, session: {"time": stamp(robot.clock.stamp_s())}
     handlers["get_ros_version"] = lambda args, session: {"version": ROS_VERSION,
                                                          "distro": ROS_DISTRO}
     for name, type_name in ROSAPI_SERVICES.items():

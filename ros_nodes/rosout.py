@@ -48,8 +48,9 @@ class RobotLog:
     parameters report (``RobotParameters.listeners``), whoever made it.
 
     Args:
-        bridge: the robot's bridge (its clock bounds the log rate).
-        robot: the robot whose node this is (its clock stamps the messages).
+        bridge: the robot's bridge.
+        robot: the robot whose node this is (its clock stamps the messages and bounds the
+            log rate).
     """
 
     def __init__(self, bridge: Bridge, robot: VirtualRobot) -> None:
@@ -80,7 +81,7 @@ class RobotLog:
         budget = self._budgets.get(site)
         if budget is None:
             budget = self._budgets[site] = TokenBucket(LOG_RATE_PER_S, LOG_BURST,
-                                                       self._bridge.clock)
+                                                       self._robot.clock.monotonic_s)
         if not budget.take(1.0):
             self._dropped[site] = self._dropped.get(site, 0) + 1
             return
@@ -88,7 +89,7 @@ class RobotLog:
         if dropped:
             text = f"{text} ({dropped} earlier lines dropped: more than " \
                    f"{LOG_RATE_PER_S:g} lines/s)"
-        msg: Message = {"stamp": stamp(self._robot.clock()), "level": level,
+        msg: Message = {"stamp": stamp(self._robot.clock.stamp_s()), "level": level,
                         "name": LOGGER_NAME, "msg": text,
                         "file": os.path.basename(caller.f_code.co_filename),
                         "function": caller.f_code.co_name, "line": caller.f_lineno}
@@ -109,6 +110,6 @@ class RobotLog:
                     for name in names]
 
         self._bridge.publish(PARAMETER_EVENTS.name, {
-            "stamp": stamp(self._robot.clock()), "node": NODE_NAME,
+            "stamp": stamp(self._robot.clock.stamp_s()), "node": NODE_NAME,
             "new_parameters": entries(new), "changed_parameters": entries(changed),
             "deleted_parameters": []})

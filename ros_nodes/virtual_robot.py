@@ -164,6 +164,25 @@ _DOUBLE_PARAMETERS = {spec.name for spec in PARAMETERS if spec.type_code == PARA
 _SPECS = {spec.name: spec for spec in PARAMETERS}
 
 
+class NodeClock:
+    """The clock of a robot the node builds itself: stamps as the node stamps them.
+
+    ``stamp_s`` is simulated time (ticks since start) with ``use_sim_time``, else wall time;
+    ``monotonic_s`` is the steady clock (the node's timer runs on it).
+    """
+
+    def __init__(self, node: VirtualRobotNode) -> None:
+        self._node = node
+
+    def monotonic_s(self) -> float:
+        """``time.monotonic()`` (s)."""
+        return time.monotonic()
+
+    def stamp_s(self) -> float:
+        """The node's stamp time (s): simulated with ``use_sim_time``, else the epoch's."""
+        return self._node.stamp_time_s()
+
+
 class VirtualRobotNode(Node):
     """The simulated robot as a ROS 2 node.
 
@@ -263,7 +282,7 @@ class VirtualRobotNode(Node):
             for spec in _NOISE_PARAMETERS})
         sim = Simulation(load_world(world), platform.robot, seed=seed, lidar=platform.lidar,
                          noise=noise)
-        return VirtualRobot(sim, clock=self._stamp_time)
+        return VirtualRobot(sim, clock=NodeClock(self))
 
     def _declare_robot_parameters(self) -> None:
         """Declare the runtime parameters at their current values; overrides apply at once."""
@@ -279,7 +298,7 @@ class VirtualRobotNode(Node):
         for spec in RUNTIME_PARAMETERS:
             _declare(self, spec, current[spec.name])
 
-    def _stamp_time(self) -> float:
+    def stamp_time_s(self) -> float:
         """Stamps: simulated time (ticks since start) with use_sim_time, else the wall clock."""
         return self._ticks * self.robot.sim.dt_s if self._use_sim_time else time.time()
 
@@ -343,7 +362,7 @@ class VirtualRobotNode(Node):
     def _tick(self) -> None:
         self._ticks += 1
         if self._clock_publisher is not None:
-            time_msg = stamp(self._stamp_time())
+            time_msg = stamp(self.stamp_time_s())
             clock = ClockMsg()
             clock.clock.sec, clock.clock.nanosec = time_msg["sec"], time_msg["nanosec"]
             self._clock_publisher.publish(clock)

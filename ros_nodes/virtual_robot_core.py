@@ -6,7 +6,6 @@ publishes, at which tick and with which stamp, is decided in one place.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Container
 from typing import Any
 
@@ -27,6 +26,7 @@ from ros_nodes.robot_messages import (
     twist_from_msg,
     world_markers_msg,
 )
+from rosbridge.core.clock import Clock, WallClock
 from rosbridge.msgs.values import Message
 
 Publication = tuple[TopicSpec, Message]
@@ -40,19 +40,21 @@ class VirtualRobot:
 
     Args:
         sim: the simulation to drive.
-        clock: wall clock for stamps (s since the epoch), as a real robot stamps its messages.
+        clock: the one clock of the robot: its ``stamp_s`` stamps the messages (s since the
+            epoch in wall time, as a real robot stamps them), its ``monotonic_s`` times the
+            robot's host (idle time, throttles, the last command's age). Default: wall time.
 
     Attributes:
-        clock: the wall clock the stamps come from (s since the epoch).
+        clock: the clock the stamps come from, and its host's intervals.
         listeners: called with every tick's publications, after ``step`` computed them (the
             rclpy node of ``websim serve --ros`` publishes them on the ROS graph with one).
     """
 
-    def __init__(self, sim: Simulation, clock: Callable[[], float] = time.time) -> None:
+    def __init__(self, sim: Simulation, clock: Clock | None = None) -> None:
         self.sim = sim
         self.parameters = RobotParameters(sim)
         self.listeners: list[Callable[[list[Publication]], None]] = []
-        self.clock = clock
+        self.clock: Clock = WallClock() if clock is None else clock
         self._ticks_since_command = 0
         self.collisions = 0
         """Times the robot ran into a wall (ticks where a contact began) since it started."""
@@ -107,7 +109,7 @@ class VirtualRobot:
     def publications(self, scan: bool = True,
                      wanted: Container[str] | None = None) -> list[Publication]:
         """The messages due at the tick just advanced to (arguments as ``step``'s)."""
-        now = self.clock()
+        now = self.clock.stamp_s()
         state = self.sim.state()
         noise = self.sim.noise
         pose_variance = (ODOM_POSE_VARIANCE,) * 3
@@ -134,7 +136,7 @@ class VirtualRobot:
 
     def latched(self) -> list[Publication]:
         """The transient-local messages: /tf_static (base_link -> laser) and /world."""
-        now = self.clock()
+        now = self.clock.stamp_s()
         lidar = self.sim.lidar.params
         laser = transform_stamped_msg(now, BASE_FRAME, LASER_FRAME, lidar.mount_x_m,
                                       lidar.mount_y_m, lidar.mount_yaw_rad)

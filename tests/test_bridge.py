@@ -20,6 +20,7 @@ from ros_nodes.parameters import PARAMETER_DOUBLE, PARAMETER_STRING
 from ros_nodes.robot_endpoint import RobotEndpoint
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge, Session
+from rosbridge.core.clock import ManualClock
 from rosbridge.core.encoding import MAX_NESTING
 from rosbridge.core.limits import ClientLimits, OriginPolicy, RateLimit
 from rosbridge.core.outbox import Outbox
@@ -40,7 +41,7 @@ class Rig:
     def __init__(self, lidar: LidarParams | None = None) -> None:
         self.clock = Clock()
         self.robot = VirtualRobot(Simulation(load_world("empty"), lidar=lidar, seed=0),
-                                  clock=lambda: 1_700_000_000.25)
+                                  clock=ManualClock(epoch_s=1_700_000_000.25))
         self.bridge = Bridge(clock=self.clock)
         self.endpoint = RobotEndpoint(self.bridge, self.robot)
 

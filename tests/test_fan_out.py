@@ -26,6 +26,7 @@ from ros_nodes.robot_host import RobotHost
 from ros_nodes.robot_server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge, Session
+from rosbridge.core.clock import ManualClock
 from rosbridge.core.outbox import Outbox
 from rosbridge.transport.front import start_websocket
 from rosbridge.transport.wire import WireFrames, serialize
@@ -210,9 +211,8 @@ def test_only_the_messages_someone_subscribes_to_are_built() -> None:
 
 
 def test_a_throttle_counts_from_when_ticks_were_due_so_late_ticks_lose_nothing() -> None:
-    clock = [100.0]
-    host = RobotHost(VirtualRobot(Simulation(load_world("empty"), seed=0)),
-                     clock=lambda: clock[0])
+    clock = ManualClock(100.0)
+    host = RobotHost(VirtualRobot(Simulation(load_world("empty"), seed=0), clock))
     watcher = Session("dashboard", True, Outbox())
     host.bridge.connect(watcher)
     host.bridge.handle(watcher, json.dumps({"op": "subscribe", "topic": "/odom",
@@ -220,7 +220,7 @@ def test_a_throttle_counts_from_when_ticks_were_due_so_late_ticks_lose_nothing()
     lateness = [0.0, 0.018, 0.0, 0.002, 0.019, 0.0, 0.011, 0.0] * 5  # up to 19 ms late
     delivered = []
     for tick, late_s in enumerate(lateness):
-        clock[0] = 100.0 + 0.05 * tick + late_s
+        clock.advance(100.0 + 0.05 * tick + late_s - clock.monotonic_s())
         queued = len(watcher.outbox)
         host.tick(late_s)
         if len(watcher.outbox) > queued:

@@ -14,6 +14,7 @@ from physics.params import SHIPPED_PARAMS_FILE
 from physics.world import WORLDS_DIR
 from ros_nodes.robot_description import robot_json
 from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.core.clock import WallClock
 from websim import compare_command, sites
 from websim import serve as serve_command
 
@@ -114,19 +115,21 @@ def _run_robot_json(args: argparse.Namespace) -> int:
 def _run_serve(args: argparse.Namespace) -> int:
     token = args.admin_token or secrets.token_urlsafe(16)
     limits, origins = serve_command.limits_from(args), serve_command.origins_from(args)
+    clock = WallClock()  # the one clock of the server: every robot's, the class's
     if args.class_spec is None:
-        site = sites.single_robot(VirtualRobot(make_simulation(args)), token, limits, origins,
-                                  args.public_ws_port or args.ws_port)
+        site = sites.single_robot(VirtualRobot(make_simulation(args), clock), token, limits,
+                                  origins, args.public_ws_port or args.ws_port)
         return serve_command.run(args, site, token)
 
     def make_robot(student: Student) -> VirtualRobot:
         world = args.world if student.world is None else student.world
         return VirtualRobot(make_simulation(argparse.Namespace(**{**vars(args),
-                                                                 "world": world})))
+                                                                 "world": world})), clock)
 
     platform = load_params(args.params)
     return serve_command.run(args, sites.classroom_site(
-        args, make_robot, (platform.robot, platform.lidar), token, limits, origins), token)
+        args, make_robot, (platform.robot, platform.lidar), token, limits, origins, clock),
+        token)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -28,6 +28,7 @@ from ros_nodes.robot_description import robot_json
 from ros_nodes.robot_host import RobotHost
 from ros_nodes.robot_server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.core.clock import Clock
 from rosbridge.core.limits import ClientLimits, OriginPolicy
 from rosbridge.transport.front import ROBOTS_PREFIX, WebSocketFront
 
@@ -114,10 +115,20 @@ def class_roster(spec: str) -> list[Student]:
 
 def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], VirtualRobot],
                    new_robot_params: tuple[RobotParams, LidarParams], token: str,
-                   limits: ClientLimits, origins: OriginPolicy) -> Site:
+                   limits: ClientLimits, origins: OriginPolicy,
+                   clock: Clock | None = None) -> Site:
     """A class: robot NAME at ``ws://HOST:9090/robots/NAME``, its page at ``/robots/NAME/``.
 
     Writes the links file when ``--links`` asks for one.
+
+    Args:
+        args: the options of ``websim serve``.
+        make_robot: builds a student's robot (with ``clock``).
+        new_robot_params: the robot and LiDAR a new robot gets (its ``robot.json``).
+        token: the instructor's token (each robot's is derived from it).
+        limits: the bounds every client lives within.
+        origins: which web pages may connect.
+        clock: the server's one clock, the robots' too. Default: wall time.
 
     Raises:
         ConfigError: a bad roster or world (the message names the file and line).
@@ -126,7 +137,7 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
                           open_class=args.open_class, max_robots=args.max_robots,
                           idle_pause_s=args.idle_pause,
                           make_token=lambda name: derived_token(token, name),
-                          lazy=args.worker)
+                          lazy=args.worker, clock=clock)
     site = Site(ClassServer(classroom, token, limits=limits, origins=origins),
                 ws_port=args.public_ws_port or args.ws_port, classroom=classroom,
                 new_robot_json=robot_json(*new_robot_params))
