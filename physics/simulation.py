@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from physics.kinematics import clamp_command
-from physics.lidar import Lidar
+from physics.lidar import Lidar, ScanRequest, scan_many
 from physics.odometry import OdometryIntegrator
 from physics.params import LidarParams, NoiseParams, RobotParams
 from physics.robot import MobileRobotPhysics
@@ -192,6 +192,15 @@ class Simulation:
             self._scan_cache = (self._tick, scan)
         return self._scan_cache[1]
 
+    def scan_request(self) -> ScanRequest:
+        """This tick's scan to cast elsewhere (``physics.lidar.scan_many``): LiDAR, pose, noise."""
+        return ScanRequest(self._lidar, self._robot.pose, self._scan_rng(),
+                           self._noise.scan_sigma_m)
+
+    def accept_scan(self, scan: LaserScan) -> None:
+        """Keep ``scan``, cast from this tick's ``scan_request``, as this tick's ``scan()``."""
+        self._scan_cache = (self._tick, scan)
+
     def state(self) -> RobotState:
         """A snapshot of everything that changes per tick."""
         return RobotState(time_s=self.time_s, tick=self._tick, mode=self.mode,
@@ -250,22 +259,16 @@ class Simulation:
 
 
 def cast_scans(simulations: Sequence[Simulation]) -> None:
-    """Cast this tick's scan of every simulation, those with alike LiDARs together.
+    """Cast this tick's scan of every simulation not yet scanned, alike LiDARs together.
 
-    Robots of a class in one world have equal LiDAR geometry (``Lidar.geometry_key``): their
-    rays are intersected in one ``raw_ranges_many``; each robot still adds its own noise from
-    its own stream, so ``scan()`` gives what it would have cast alone (to rounding, ~1e-15 m).
+    ``physics.lidar.scan_many`` of their ``scan_request``: robots of a class in one world
+    share one ray intersection, each with its own noise, so ``scan()`` then gives what it
+    would have cast alone (to rounding, ~1e-15 m).
     """
-    alike: dict[Any, list[Simulation]] = {}
-    for simulation in simulations:
-        if not simulation.scan_is_current:
-            alike.setdefault(simulation._lidar.geometry_key, []).append(simulation)
-    for group in alike.values():
-        lidar = group[0]._lidar
-        raws = lidar.raw_ranges_many([simulation._robot.pose for simulation in group])
-        for simulation, raw in zip(group, raws, strict=True):
-            simulation._scan_cache = (simulation._tick, simulation._lidar.scan_from_raw(
-                raw, simulation._scan_rng(), simulation._noise.scan_sigma_m))
+    pending = [simulation for simulation in simulations if not simulation.scan_is_current]
+    scans = scan_many([simulation.scan_request() for simulation in pending])
+    for simulation, scan in zip(pending, scans, strict=True):
+        simulation.accept_scan(scan)
 
 
 def _check_clearance(world_space: WorldSpace, world: World, x: float, y: float,
