@@ -23,8 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from physics import TICK_PERIOD_S, ConfigError
-from physics.simulation import cast_scans
 from ros_nodes.robot_host import RobotHost
+from ros_nodes.sensors import Sensor
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.clock import Clock, WallClock
 from rosbridge.transport.schedule import Schedule
@@ -237,7 +237,11 @@ class Classroom:
                             now_s + index * slot_s, lateness_s)
 
     def _tick_group(self, hosts: list[RobotHost], due_s: float, lateness_s: float) -> None:
-        """Advance a group's robots, cast their scans together, then deliver each's tick.
+        """Advance a group's robots, prepare their costly readings together, deliver each's.
+
+        A sensor with ``prepare_many`` (the LiDAR) due on several robots of the group has
+        their readings computed at once (one ray intersection for a world); each robot's
+        ``end_tick`` then finds its reading ready.
 
         Args:
             hosts: the group's robots.
@@ -246,12 +250,18 @@ class Classroom:
         """
         late_s = lateness_s + max(0.0, self._clock.monotonic_s() - due_s)
         advanced = [host for host in hosts if host.begin_tick(late_s)]
-        scanning = [host for host in advanced if host.scan_due(late_s)]
-        if len(scanning) > 1:
-            try:
-                cast_scans([host.robot.sim for host in scanning])
-            except Exception as error:  # each robot then casts its own, within its boundary
-                for host in scanning:
-                    host.faults.record("casting the class's scans together", error)
+        preparing: dict[Sensor, list[RobotHost]] = {}
+        for host in advanced:
+            for sensor in host.due(late_s):
+                if sensor.prepare_many is not None:
+                    preparing.setdefault(sensor, []).append(host)
+        for sensor, group in preparing.items():
+            if len(group) > 1 and sensor.prepare_many is not None:
+                try:
+                    sensor.prepare_many([host.robot.sim for host in group])
+                except Exception as error:  # each robot then builds its own, in its boundary
+                    for host in group:
+                        host.faults.record(f"preparing the class's {sensor.topic.name} "
+                                           "together", error)
         for host in advanced:
             host.end_tick(late_s)

@@ -21,8 +21,8 @@ from typing import Any
 
 from physics import TICK_PERIOD_S, ConfigError
 from ros_nodes.robot_endpoint import RobotEndpoint
-from ros_nodes.robot_interface import SCAN
 from ros_nodes.robot_services import require_admin
+from ros_nodes.sensors import Sensor
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.errors import ServiceError
@@ -34,7 +34,8 @@ log = logging.getLogger("websim.robot")
 
 SHED_SCANS_AFTER_S = 0.025
 """A tick that starts this late (half a period: the host cannot keep up with the clients)
-publishes no /scan: the biggest message goes first, /odom and /tf keep their rate."""
+publishes no sheddable sensor's message (/scan): the biggest message goes first, /odom and
+/tf keep their rate."""
 
 STATUS_SERVICE = "/websim/status"
 """Admin only: a robot's clients and their addresses, its last driver, collisions, mode,
@@ -51,9 +52,10 @@ class TickStats:
     Attributes:
         ticks: ticks run since start (paused ones not counted).
         lateness_s: how late each recent tick started after its deadline (s).
-        scans_shed: /scan messages not published because their tick was late.
-        scans_cast: LiDAR scans computed (only on ticks where a client subscribes to /scan,
-            or a ROS graph is attached).
+        scans_shed: messages of sheddable sensors (``Sensor.sheddable``: the LiDAR's /scan)
+            not built because their tick was late.
+        scans_cast: messages of sheddable sensors built (only on ticks where a client
+            subscribes to their topic, or a ROS graph or a tap listens).
         resets: times the robot was reset because a fault left it in a non-finite state.
         paused: whether the robot is paused now (nobody connected for the idle time).
     """
@@ -98,8 +100,6 @@ class RobotHost:
         self.schedule = schedule or Schedule(TICK_PERIOD_S)
         self.held = False
         """Paused by an admin (``/websim/pause``), whoever is connected."""
-        self.always_scan = False
-        """Cast the LiDAR whether or not a client subscribes (a ROS node publishes it)."""
         self._idle_pause_s = idle_pause_s
         self._clock = clock
         self._last_client_s = clock.monotonic_s()
@@ -124,8 +124,8 @@ class RobotHost:
         """One tick: step the robot, deliver its messages, expire service calls; never raises.
 
         A robot nobody has been connected to for ``idle_pause_s`` is not stepped (paused).
-        ``begin_tick`` then ``end_tick``; a class casts its robots' scans in between
-        (``physics.simulation.cast_scans``).
+        ``begin_tick`` then ``end_tick``; a class prepares its robots' costly readings
+        together in between (``Sensor.prepare_many``: the LiDAR's ``cast_scans``).
         """
         if self.begin_tick(lateness_s):
             self.end_tick(lateness_s)
@@ -155,31 +155,33 @@ class RobotHost:
             return False
         return True
 
-    def scan_due(self, lateness_s: float = 0.0) -> bool:
-        """Whether ``end_tick`` will cast a /scan (someone wants it, and the tick is on time)."""
-        return lateness_s <= SHED_SCANS_AFTER_S and self.robot.scan_due(*self._wants())
+    def due(self, lateness_s: float = 0.0) -> list[Sensor]:
+        """The sensors whose messages ``end_tick`` will build (wanted, and not shed)."""
+        shed = lateness_s > SHED_SCANS_AFTER_S
+        return [sensor for sensor in self.robot.due(self._wanted())
+                if not (shed and sensor.sheddable)]
 
     def end_tick(self, lateness_s: float = 0.0) -> None:
         """Build and deliver the messages of the tick ``begin_tick`` advanced to; never raises.
 
         Only messages some client subscribes to are built (for a ROS graph: all). A tick that
-        starts half a period late casts no /scan: it is shed, /odom and /tf keep their rate.
+        starts half a period late builds no sheddable sensor's message (/scan): it is shed,
+        /odom and /tf keep their rate.
         """
-        scan, wanted = self._wants()
-        if scan and lateness_s > SHED_SCANS_AFTER_S and self.robot.scan_due(scan, wanted):
-            self.stats.scans_shed += 1
-            scan = False
+        wanted = self._wanted()
+        shed = lateness_s > SHED_SCANS_AFTER_S
+        sheddable = sum(sensor.sheddable for sensor in self.robot.due(wanted))
+        if shed:
+            self.stats.scans_shed += sheddable
         try:
-            publications = self.robot.publications(scan, wanted)
+            publications = self.robot.publications(wanted, shed)
         except Exception as error:  # the robot's boundary: record, recover, go on
             self.faults.record("stepping the robot", error)
             self._recover("building its messages failed")
             publications = []
-        messages = []
-        for spec, msg in publications:
-            if spec is SCAN:
-                self.stats.scans_cast += 1
-            messages.append((spec.name, msg))
+        else:
+            self.stats.scans_cast += 0 if shed else sheddable
+        messages = [(spec.name, msg) for spec, msg in publications]
         try:  # throttles count from when the tick was due: a late tick is no shorter gap
             self.bridge.publish_many(messages, self._clock.monotonic_s() - lateness_s)
         except Exception as error:  # the robot's boundary: record, go on
@@ -189,12 +191,11 @@ class RobotHost:
         except Exception as error:
             self.faults.record("expiring service calls", error)
 
-    def _wants(self) -> tuple[bool, Collection[str] | None]:
-        """(scan, wanted) for the robot: what its clients subscribe to (a graph: all)."""
-        topics = self.bridge.topics
-        if self.always_scan or self.bridge.graph.attached:
-            return True, None
-        return topics.has_subscribers(SCAN.name), topics.subscribed_topics()
+    def _wanted(self) -> Collection[str] | None:
+        """The topics the robot's clients subscribe to (None: all, for a ROS graph)."""
+        if self.bridge.graph.attached:
+            return None
+        return self.bridge.topics.subscribed_topics()
 
     def _recover(self, why: str) -> None:
         """Put the robot back at spawn (a finite state) after a fault."""

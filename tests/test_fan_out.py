@@ -191,7 +191,7 @@ def test_a_driver_gets_all_of_its_tick_in_one_write() -> None:
     writes.clear()
     published = []
     for _ in range(2):  # /scan comes every second tick
-        messages = [(spec.name, msg) for spec, msg in robot.step(scan=True)]
+        messages = [(spec.name, msg) for spec, msg in robot.step()]
         published.append(sum(name in ("/odom", "/tf", "/scan") for name, _ in messages))
         bridge.publish_many(messages)
         driver.outbox.take(1 << 20)  # what the connection's write takes
@@ -201,12 +201,12 @@ def test_a_driver_gets_all_of_its_tick_in_one_write() -> None:
 
 def test_only_the_messages_someone_subscribes_to_are_built() -> None:
     robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
-    assert [spec.name for spec, _ in robot.step(scan=True, wanted={"/odom"})] == ["/odom"]
-    assert [spec.name for spec, _ in robot.step(scan=True, wanted={"/odom", "/scan"})] == \
+    assert [spec.name for spec, _ in robot.step(wanted={"/odom"})] == ["/odom"]
+    assert [spec.name for spec, _ in robot.step(wanted={"/odom", "/scan"})] == \
         ["/odom", "/scan"]  # the scan tick
     heard: list[list[str]] = []
     robot.listeners.append(lambda out: heard.append([spec.name for spec, _ in out]))
-    robot.step(scan=True, wanted={"/odom"})  # a listener (the ROS node) gets everything
+    robot.step(wanted={"/odom"})  # a listener (the ROS node) gets everything
     assert heard == [["/odom", "/tf", "/ground_truth"]]
 
 

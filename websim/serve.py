@@ -264,7 +264,8 @@ def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
     """Start rclpy in-process (``--ros``); RuntimeError with the reason if it cannot.
 
     One robot: its node and the relay of its bridge to the graph. A class: a namespaced node
-    per robot of the roster, whose LiDAR is then cast on every scan tick.
+    per robot of the roster, whose LiDAR is then cast on every scan tick (a node listens to
+    its robot: the robot builds all its messages).
     """
     try:
         from websim.ros_runtime import ClassRosRuntime, RosRuntime
@@ -280,8 +281,6 @@ def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
         if unnamable:
             raise RuntimeError(f"--ros: robot names must also be ROS namespaces (a letter or _ "
                                f"first, no -): {', '.join(unnamable[:5])}")
-        for _, host in hosts:
-            host.always_scan = True
         runtime = ClassRosRuntime([(name, host.robot) for name, host in hosts], loop)
     runtime.start()
     return runtime

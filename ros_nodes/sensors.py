@@ -1,0 +1,94 @@
+"""The robot's sensors: each topic it publishes per tick, and how its message is built.
+
+A ``Sensor`` is one periodic topic of the robot (its ``TopicSpec``: name, type, and rate as
+``every_ticks``), how its message is built from the simulation at a stamp, whether a late
+tick may shed it, and, for a costly one, how to compute the readings of several robots at
+once (a class in one world). The robot publishes ``ROBOT_SENSORS``; adding a sensor is one
+more ``Sensor`` in that tuple (and its ``TopicSpec`` in ``robot_interface``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from physics import Simulation
+from physics.simulation import cast_scans
+from ros_nodes.robot_interface import GROUND_TRUTH, ODOM, SCAN, TF, TopicSpec
+from ros_nodes.robot_messages import (
+    BASE_FRAME,
+    MAP_FRAME,
+    ODOM_FRAME,
+    ODOM_POSE_VARIANCE,
+    ODOM_TWIST_VARIANCE,
+    laser_scan_msg,
+    odometry_msg,
+    tf_msg,
+    transform_stamped_msg,
+)
+from rosbridge.msgs.values import Message
+
+BuildMessage = Callable[[Simulation, float], Message]
+"""Builds a sensor's message from the simulation at a stamp (s)."""
+
+PrepareMany = Callable[[Sequence[Simulation]], None]
+"""Computes this tick's readings of several simulations together (then ``build`` finds them)."""
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """One topic the robot publishes every ``topic.every_ticks`` ticks.
+
+    Attributes:
+        topic: its topic (name, type, QoS; ``every_ticks`` is its rate, in 50 ms ticks).
+        build: its message from the simulation just advanced, at a stamp (s; the robot's
+            ``clock.stamp_s``).
+        sheddable: a tick that starts late may leave it out (the LiDAR: the biggest
+            message, whose loss a reader survives); the others keep their rate.
+        prepare_many: computes this tick's readings of several robots at once, when that is
+            cheaper than one by one (the LiDAR of a class in one world); None: none needed.
+    """
+
+    topic: TopicSpec
+    build: BuildMessage
+    sheddable: bool = False
+    prepare_many: PrepareMany | None = None
+
+    def due(self, tick: int) -> bool:
+        """Whether it publishes at ``tick`` (ticks since spawn or reset)."""
+        return tick % self.topic.every_ticks == 0
+
+
+def odometry(sim: Simulation, stamp_s: float) -> Message:
+    """``/odom``: wheel odometry in ``odom``, its covariances from the noise model."""
+    noise = sim.noise
+    pose_variance = (ODOM_POSE_VARIANCE,) * 3
+    twist_variance = (max(noise.odom_linear_sigma_mps**2, ODOM_TWIST_VARIANCE),
+                      max(noise.odom_angular_sigma_rps**2, ODOM_TWIST_VARIANCE))
+    return odometry_msg(sim.odometry(), stamp_s, ODOM_FRAME, pose_variance, twist_variance)
+
+
+def odometry_transform(sim: Simulation, stamp_s: float) -> Message:
+    """``/tf``: odom -> base_link, the odometry's pose."""
+    odom = sim.odometry()
+    return tf_msg([transform_stamped_msg(stamp_s, ODOM_FRAME, BASE_FRAME, odom.x, odom.y,
+                                         odom.theta)])
+
+
+def ground_truth(sim: Simulation, stamp_s: float) -> Message:
+    """``/ground_truth``: the true pose and speeds in ``map`` (simulation only)."""
+    return odometry_msg(sim.ground_truth(), stamp_s, MAP_FRAME)
+
+
+def laser_scan(sim: Simulation, stamp_s: float) -> Message:
+    """``/scan``: the LiDAR's scan in ``laser`` (cast now unless prepared this tick)."""
+    return laser_scan_msg(sim.scan(), stamp_s)
+
+
+ODOMETRY = Sensor(ODOM, odometry)
+ODOMETRY_TF = Sensor(TF, odometry_transform)
+GROUND_TRUTH_POSE = Sensor(GROUND_TRUTH, ground_truth)
+LIDAR = Sensor(SCAN, laser_scan, sheddable=True, prepare_many=cast_scans)
+
+ROBOT_SENSORS = (ODOMETRY, ODOMETRY_TF, GROUND_TRUTH_POSE, LIDAR)
+"""What the robot publishes per tick, in the order it publishes it."""
