@@ -93,8 +93,7 @@ class RobotHost:
         self.robot = robot
         self.faults = Faults()
         clock = robot.clock
-        self.bridge = Bridge(clock=clock.monotonic_s, faults=self.faults,
-                             refusals=(ConfigError,))
+        self.bridge = Bridge(clock=clock, faults=self.faults, refusals=(ConfigError,))
         self.endpoint = RobotEndpoint(self.bridge, robot)
         self.stats = TickStats()
         self.schedule = schedule or Schedule(TICK_PERIOD_S)

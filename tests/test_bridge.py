@@ -34,6 +34,12 @@ class Clock:
     def __call__(self) -> float:
         return self.now_s
 
+    def monotonic_s(self) -> float:
+        return self.now_s
+
+    def stamp_s(self) -> float:
+        return 1_700_000_000.0 + self.now_s
+
 
 class Rig:
     """A robot, its bridge, and helpers to act as clients."""

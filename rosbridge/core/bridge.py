@@ -7,8 +7,11 @@ to the capability that implements the op, as rosbridge_library splits them:
 
 * ``capabilities.topics``: advertise, publish, subscribe, throttles, queues, latching;
 * ``capabilities.services``: calls, client-provided services, timeouts;
-* ``capabilities.actions``: ROS 2 action goals, client-provided actions, cancels;
-* ``capabilities.graph``: the ROS 2 graph relay (``websim serve --ros``).
+* ``capabilities.actions``: ROS 2 action goals, client-provided actions, cancels.
+
+They share one ``BridgeContext`` (the clients, the clock, faults, refusals and the
+``GraphPort`` to a ROS 2 graph, ``websim serve --ros``), and reach each other only through
+what the bridge hands them.
 
 The robot is attached like a client of the hub (``robot_endpoint.attach``): it subscribes
 /cmd_vel and publishes its topics through ``topics``. A bridge holds no module-level state:
@@ -23,18 +26,19 @@ bridge goes on.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import Any
 
 from rosbridge.core import access
 from rosbridge.core.capabilities.actions import Actions
-from rosbridge.core.capabilities.graph import Graph, GraphRelay
 from rosbridge.core.capabilities.services import SERVICE_TIMEOUT_S, Services
 from rosbridge.core.capabilities.topics import Topics
+from rosbridge.core.clock import Clock, WallClock
+from rosbridge.core.context import BridgeContext
 from rosbridge.core.encoding import parse_json
 from rosbridge.core.errors import BridgeError, ServiceError
 from rosbridge.core.faults import Faults
+from rosbridge.core.graph_port import Graph, GraphPort
 from rosbridge.core.outbox import Frame
 from rosbridge.core.schema import NAME_FIELDS, ProtocolError, read_operation, resolve_name
 from rosbridge.core.session import Session
@@ -49,7 +53,8 @@ class Bridge:
     """The rosbridge hub for one simulated robot and its clients.
 
     Args:
-        clock: monotonic clock (s), for throttling and service timeouts.
+        clock: the clock of throttles, service timeouts and ``cbor-raw`` stamps (default:
+            wall time).
         refusals: the errors of the bridge's owner that refuse an operation with a reason
             for the client (a robot's invalid command or parameter), besides the bridge's
             own ``BridgeError`` and ``MessageError``.
@@ -61,23 +66,25 @@ class Bridge:
         topics: the topic capability (in-process endpoints publish and subscribe here).
         services: the service capability (in-process services are added here).
         actions: the action capability (``attach`` the ROS graph's actions with ``--ros``).
-        graph: the ROS 2 graph relay (``attach`` one with ``--ros``).
+        graph: the port to a ROS 2 graph (``attach`` one with ``--ros``).
         faults: unexpected exceptions caught in handlers.
+        clock: the bridge's clock.
+        refusals: what an in-process handler raises to refuse with a reason (not a fault).
     """
 
-    def __init__(self, clock: Callable[[], float] = time.monotonic,
+    def __init__(self, clock: Clock | None = None,
                  service_timeout_s: float = SERVICE_TIMEOUT_S,
                  faults: Faults | None = None,
                  refusals: tuple[type[Exception], ...] = ()) -> None:
-        self.clock = clock
+        self.clock: Clock = WallClock() if clock is None else clock
         self.refusals: tuple[type[Exception], ...] = (BridgeError, MessageError, *refusals)
-        """What an in-process handler raises to refuse with a reason (not a fault)."""
-        self.sessions: set[Session] = set()
         self.faults = faults or Faults()
-        self.topics = Topics(self)
-        self.services = Services(self, service_timeout_s)
-        self.graph = GraphRelay(self)
-        self.actions = Actions(self)
+        self.graph = GraphPort(lambda: self.topics.relayed_topics())
+        self._context = BridgeContext(self.clock, self.faults, self.refusals, self.graph)
+        self.sessions: set[Session] = self._context.sessions
+        self.topics = Topics(self._context)
+        self.services = Services(self._context, service_timeout_s)
+        self.actions = Actions(self._context)
         self._handlers: dict[str, Handler] = {
             **self.topics.handlers(), **self.services.handlers(), **self.actions.handlers(),
             "set_level": self._set_level, "auth": lambda session, message: None,
@@ -94,7 +101,7 @@ class Bridge:
                      tick_s: float | None = None) -> None:
         """Send one tick's in-process messages; each client gets its share in one write.
 
-        ``tick_s``: when the tick was due (``clock`` s), for throttles.
+        ``tick_s``: when the tick was due (``clock.monotonic_s``), for throttles.
         """
         self.topics.publish_many(messages, tick_s)
 

@@ -63,3 +63,7 @@ class ManualClock:
         if seconds < 0:
             raise ValueError(f"a clock does not go back ({seconds} s)")
         self._monotonic_s += seconds
+
+
+WALL_CLOCK = WallClock()
+"""Real time, for what is given no clock (it holds no state: one serves everyone)."""

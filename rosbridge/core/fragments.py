@@ -14,12 +14,12 @@ bridge to handle as it handles any frame.
 from __future__ import annotations
 
 import math
-import time
 import uuid
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from rosbridge.core.clock import WALL_CLOCK
 from rosbridge.core.encoding import to_json
 from rosbridge.core.errors import BridgeError
 from rosbridge.core.limits import ClientLimits
@@ -68,11 +68,11 @@ class Reassembly:
         limits: the client's bounds: ``max_frame_bytes`` for all partial messages together
             (a fragmented message can be no larger than one frame), ``max_fragments``,
             ``max_partial_messages`` and ``fragment_timeout_s``.
-        clock: monotonic clock (s).
+        clock: monotonic time (s): a ``Clock``'s ``monotonic_s`` (default: wall time).
     """
 
     def __init__(self, limits: ClientLimits,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = WALL_CLOCK.monotonic_s) -> None:
         self._limits = limits
         self._clock = clock
         self._partial: dict[Any, _Partial] = {}

@@ -1,22 +1,24 @@
-"""The relay to a ROS 2 graph (``websim serve --ros``): topics reach beyond the clients.
+"""The bridge's port to a ROS 2 graph (``websim serve --ros``): topics reach beyond the clients.
 
 A subscription to a topic the simulator does not publish also subscribes on the graph, and
 what clients publish (``/cmd_vel`` included) is also published there. The graph's messages
-come back through ``Topics.publish``. ``Graph`` is the only way out; this module imports no
-ROS. Without a graph attached every method does nothing.
+come back through ``Bridge.publish``. ``Graph`` is the only way out; this module imports no
+ROS (the rclpy side is ``rosbridge.graph.relay.GraphRelay``). Without a graph attached every
+method does nothing.
+
+The capabilities reach the graph only through this port (``BridgeContext.graph``), and the
+port knows no capability: what it must know of them (the topics clients subscribe to) it is
+given as a callable.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Any, Protocol
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any, Protocol
 
 from rosbridge.core.errors import BridgeError
 from rosbridge.core.session import Session
 from rosbridge.msgs.values import normalize_type
-
-if TYPE_CHECKING:
-    from rosbridge.core.bridge import Bridge
 
 
 class Graph(Protocol):
@@ -66,15 +68,16 @@ class Graph(Protocol):
         """Stop offering a client's service on the graph."""
 
 
-class GraphRelay:
-    """The graph capability of one bridge.
+class GraphPort:
+    """One bridge's port to a ROS 2 graph; errors go back to the client that caused them.
 
     Args:
-        bridge: the bridge it belongs to (its topics, and errors back to clients).
+        relayed_topics: the topics to relay from a graph once one is attached: those clients
+            subscribe to that the simulator does not publish.
     """
 
-    def __init__(self, bridge: Bridge) -> None:
-        self._bridge = bridge
+    def __init__(self, relayed_topics: Callable[[], Iterable[str]] = tuple) -> None:
+        self._relayed_topics = relayed_topics
         self._graph: Graph | None = None
         self._subscribed: set[str] = set()
         self._advertised: set[str] = set()
@@ -87,7 +90,7 @@ class GraphRelay:
         self._advertised.clear()
         self._refused.clear()
         if graph is not None:
-            for topic in list(self._bridge.topics.subscribed_topics()):
+            for topic in list(self._relayed_topics()):
                 self.subscribe(None, topic, None)
 
     @property
@@ -100,16 +103,17 @@ class GraphRelay:
         return {} if self._graph is None else self._graph.topic_types()
 
     def subscribe(self, session: Session | None, topic: str, type_name: str | None) -> None:
-        """Also relay ``topic`` from the graph, unless the simulator publishes it here."""
-        if self._graph is None or topic in self._bridge.topics.owned() \
-                or topic in self._subscribed:
+        """Also relay ``topic`` from the graph (one the simulator does not publish).
+
+        ``session``: the client that subscribed, told if the graph refuses (None: nobody).
+        """
+        if self._graph is None or topic in self._subscribed:
             return
         try:
             self._graph.subscribe(topic, normalize_type(type_name) if type_name else None)
         except BridgeError as error:
             if session is not None:
-                self._bridge.report(session, f"{error}; {topic} is relayed between clients "
-                                             "only")
+                session.report(f"{error}; {topic} is relayed between clients only")
             return
         self._subscribed.add(topic)
 
@@ -127,7 +131,7 @@ class GraphRelay:
             self._graph.advertise(topic, type_name)
         except BridgeError as error:
             self._refused.add(topic)  # said once, not at every publish
-            self._bridge.report(session, f"{error}; {topic} is relayed between clients only")
+            session.report(f"{error}; {topic} is relayed between clients only")
             return
         self._advertised.add(topic)
 
@@ -184,7 +188,7 @@ class GraphRelay:
         try:
             self._graph.offer_service(service, type_name, forward)
         except BridgeError as error:
-            self._bridge.report(session, f"{error}; {service} is offered to clients only")
+            session.report(f"{error}; {service} is offered to clients only")
 
     def withdraw_service(self, service: str) -> None:
         """A client's service is gone: withdraw it from the graph."""

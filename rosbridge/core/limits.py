@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from urllib.parse import urlsplit
+
+from rosbridge.core.clock import WALL_CLOCK
 
 DEFAULT_MAX_RATE = 200.0
 """Messages per second a client may send, sustained; a browser sends a few dozen at most
@@ -104,11 +105,11 @@ class TokenBucket:
     Args:
         rate: units refilled per second (> 0).
         burst: the bucket's size (> 0).
-        clock: monotonic clock (s).
+        clock: monotonic time (s): a ``Clock``'s ``monotonic_s`` (default: wall time).
     """
 
     def __init__(self, rate: float, burst: float,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = WALL_CLOCK.monotonic_s) -> None:
         if not (math.isfinite(rate) and rate > 0 and math.isfinite(burst) and burst > 0):
             raise ValueError(f"rate and burst must be positive, got {rate}, {burst}")
         self.rate = rate
@@ -146,11 +147,11 @@ class RateLimit:
 
     Args:
         rate: messages per second (> 0).
-        clock: monotonic clock (s).
+        clock: monotonic time (s): a ``Clock``'s ``monotonic_s`` (default: wall time).
     """
 
     def __init__(self, rate: float = DEFAULT_MAX_RATE,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = WALL_CLOCK.monotonic_s) -> None:
         if not (math.isfinite(rate) and rate > 0):
             raise ValueError(f"rate must be a positive number of messages/s, got {rate}")
         self.rate = rate

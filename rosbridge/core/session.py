@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from rosbridge.core.clock import Clock
 from rosbridge.core.encoding import to_json
 from rosbridge.core.errors import shorten
 from rosbridge.core.fragments import Reassembly, fragment
@@ -91,7 +92,7 @@ class Session:
         is_admin: whether it presented the admin token.
         outbox: where its outgoing frames wait (default: one bounded by ``limits``).
         limits: the bounds this client lives within.
-        clock: monotonic clock (s) for its budgets.
+        clock: the clock of its budgets and fragment timeouts (default: wall time).
 
     Attributes:
         advertised: topic -> {advertise id: type}; a topic stays advertised while any id does.
@@ -106,7 +107,7 @@ class Session:
 
     def __init__(self, peer: str, is_admin: bool, outbox: Outbox | None = None, *,
                  limits: ClientLimits | None = None,
-                 clock: Callable[[], float] | None = None) -> None:
+                 clock: Clock | None = None) -> None:
         self.peer = peer
         self.is_admin = is_admin
         self.limits = limits or ClientLimits()
@@ -120,11 +121,11 @@ class Session:
         self.frame_bytes = 0
         """Size of the frame being handled (what a publish costs the relay budget)."""
         self.fragment_size: int | None = None
-        self.fragments = Reassembly(self.limits, *(() if clock is None else (clock,)))
-        budget_args = () if clock is None else (clock,)
+        clock_args = () if clock is None else (clock.monotonic_s,)
+        self.fragments = Reassembly(self.limits, *clock_args)
         self.relay_budget = TokenBucket(  # a burst holds one message of the largest size
             self.limits.relay_bytes_per_s,
-            max(self.limits.relay_bytes_per_s, self.limits.max_frame_bytes), *budget_args)
+            max(self.limits.relay_bytes_per_s, self.limits.max_frame_bytes), *clock_args)
 
     def reply(self, message: Mapping[str, Any]) -> None:
         """Queue a reply (JSON text), in ``fragment`` ops if longer than ``fragment_size``."""

@@ -29,6 +29,7 @@ from websockets.sync.client import ClientConnection, connect
 
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.capabilities.topics import Encoded
+from rosbridge.core.clock import ManualClock
 from rosbridge.core.encoding import CBOR_TYPED_ARRAYS, to_cbor
 from rosbridge.core.limits import ClientLimits
 from rosbridge.core.outbox import Outbox
@@ -234,15 +235,15 @@ def test_hostile_fragments_get_clear_errors_and_the_server_stays_fine(
 
 
 def test_an_incomplete_message_is_dropped_after_fragment_timeout_with_an_error() -> None:
-    now = [0.0]
+    clock = ManualClock()
     limits = ClientLimits(fragment_timeout_s=5.0)
-    bridge = Bridge(clock=lambda: now[0])
+    bridge = Bridge(clock=clock)
     outbox = Outbox()
-    session = Session("test", False, outbox, limits=limits, clock=lambda: now[0])
+    session = Session("test", False, outbox, limits=limits, clock=clock)
     bridge.connect(session)
     bridge.handle(session, '{"op": "set_level", "level": "error"}')
     bridge.handle(session, '{"op": "fragment", "id": 7, "data": "{", "num": 0, "total": 2}')
-    now[0] = 6.0
+    clock.advance(6.0)
     bridge.handle(session, '{"op": "set_level", "level": "error"}')
     status = json.loads(str(outbox.pop()))
     assert "fragmented message 7: incomplete after 5 s (1 of 2 fragments" in status["msg"]

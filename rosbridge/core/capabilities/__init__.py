@@ -1,6 +1,8 @@
-"""The bridge's capabilities, one module per group of operations (as rosbridge_library's).
+"""The bridge's capabilities, one module per family of operations (as rosbridge_library's).
 
 ``topics`` (advertise, publish, subscribe...), ``services`` (call, provide, time out) and
-``graph`` (the relay to a ROS 2 graph with ``--ros``). Each works on the per-client
-``Session`` objects of one ``Bridge``; adding an op touches one module and the schema.
+``actions`` (goals, feedback, results, cancels). Each works on the per-client ``Session``
+objects of one bridge through a ``BridgeContext`` (``rosbridge.core.context``), never through
+the ``Bridge`` nor through another capability; adding an op touches one module and the
+schema.
 """

@@ -25,15 +25,13 @@ import functools
 import itertools
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
+from rosbridge.core.context import BridgeContext
 from rosbridge.core.errors import BridgeError
 from rosbridge.core.schema import GoalStatus
 from rosbridge.core.session import Session
 from rosbridge.msgs.values import normalize_type
-
-if TYPE_CHECKING:
-    from rosbridge.core.bridge import Bridge
 
 Cancel = Callable[[], None]
 """Asks a goal's server to cancel it; its result still comes (status CANCELED, say)."""
@@ -140,14 +138,14 @@ class Actions:
     """The action capability of one bridge.
 
     Args:
-        bridge: the bridge it belongs to (its sessions, errors back to clients).
+        context: what it shares with the bridge's other capabilities (its sessions).
     """
 
     OPS = ("advertise_action", "unadvertise_action", "send_action_goal",
            "cancel_action_goal", "action_feedback", "action_result")
 
-    def __init__(self, bridge: Bridge) -> None:
-        self._bridge = bridge
+    def __init__(self, context: BridgeContext) -> None:
+        self._context = context
         self._spelled: dict[str, str] = {}
         """Each served action's type as its server spelled it: goals echo it (rosbridge)."""
         self._graph: ActionGraph | None = None
@@ -248,7 +246,7 @@ class Actions:
 
     def _cancel(self, key: str, goal: _Goal) -> None:
         if goal.server is not None:
-            if goal.server in self._bridge.sessions:
+            if goal.server in self._context.sessions:
                 goal.server.reply({"op": "cancel_action_goal", "id": key,
                                    "action": goal.action})
         elif goal.cancel_on_graph is not None:
@@ -324,7 +322,7 @@ class Actions:
         try:
             self._graph.advertise_action(action, type_name, on_goal)
         except BridgeError as error:
-            self._bridge.report(session, f"{error}; {action} is served to clients only")
+            session.report(f"{error}; {action} is served to clients only")
             return
         self._offered.add(action)
 

@@ -11,15 +11,13 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from rosbridge.core.context import BridgeContext
 from rosbridge.core.errors import BridgeError, shorten
 from rosbridge.core.session import Session
 from rosbridge.msgs import definitions as message_types
 from rosbridge.msgs.values import normalize_service_type
-
-if TYPE_CHECKING:
-    from rosbridge.core.bridge import Bridge
 
 log = logging.getLogger("websim.bridge")
 
@@ -107,14 +105,15 @@ class Services:
     """The service capability of one bridge.
 
     Args:
-        bridge: the bridge it belongs to (sessions, clock).
+        context: what it shares with the bridge's other capabilities (sessions, clock,
+            refusals, the graph port).
         timeout_s: how long a call to a client-provided service may take.
     """
 
     OPS = ("call_service", "service_response", "advertise_service", "unadvertise_service")
 
-    def __init__(self, bridge: Bridge, timeout_s: float = SERVICE_TIMEOUT_S) -> None:
-        self._bridge = bridge
+    def __init__(self, context: BridgeContext, timeout_s: float = SERVICE_TIMEOUT_S) -> None:
+        self._context = context
         self._timeout_s = timeout_s
         self._local: dict[str, tuple[str, ServiceHandler]] = {}
         self._providers: dict[str, tuple[Session, str]] = {}
@@ -150,7 +149,7 @@ class Services:
 
     def expire(self) -> None:
         """Fail calls to client-provided services that waited longer than the timeout."""
-        now = self._bridge.clock()
+        now = self._context.clock.monotonic_s()
         for call_id, call in list(self._pending.items()):
             if now >= call.deadline_s:
                 del self._pending[call_id]
@@ -160,7 +159,7 @@ class Services:
     def _answer_for(self, session: Session, call_id: Any, service: str) -> Answer:
         """How the outcome of ``session``'s call reaches it (not at all once it has left)."""
         def answer(ok: bool, values: Any) -> None:
-            if session not in self._bridge.sessions:
+            if session not in self._context.sessions:
                 return
             if not ok:
                 self.fail(session, call_id, service, shorten(str(values)))
@@ -180,13 +179,13 @@ class Services:
         if service in self._providers:
             try:
                 args = request_args(self._providers[service][1], args)
-            except self._bridge.refusals as error:
+            except self._context.refusals as error:
                 self.fail(session, call_id, service, f"{service}: {shorten(str(error))}")
                 return
             self._forward(session, service, args, self._answer_for(session, call_id, service))
             return
         if service not in self._local:
-            if not self._bridge.graph.call_service(
+            if not self._context.graph.call_service(
                     service, args if isinstance(args, dict) else {},
                     self._answer_for(session, call_id, service)):
                 self.fail(session, call_id, service, f"Service {service} does not exist")
@@ -200,7 +199,7 @@ class Services:
             args = {}
         try:
             values = handler(args, session)
-        except self._bridge.refusals as error:
+        except self._context.refusals as error:
             reason = shorten(str(error))
             log.warning("client %s: %s failed: %s", session.peer, service, reason)
             self.fail(session, call_id, service, reason)
@@ -228,7 +227,7 @@ class Services:
             def answer(ok: bool, got: Any, index: int = index) -> None:
                 answered(index, ok, got)
 
-            if not self._bridge.graph.call_service(service, dict(args), answer):
+            if not self._context.graph.call_service(service, dict(args), answer):
                 answer(False, f"Service {service} does not exist")
 
     def _forward(self, caller: Session | None, service: str, args: Any,
@@ -237,9 +236,8 @@ class Services:
         provider, _ = self._providers[service]
         count = self._call_counts[service] = self._call_counts.get(service, 0) + 1
         forward_id = f"service_request:{service}:{count}"
-        self._pending[forward_id] = _PendingCall(caller, service, provider,
-                                                 self._bridge.clock() + self._timeout_s,
-                                                 answer)
+        deadline_s = self._context.clock.monotonic_s() + self._timeout_s
+        self._pending[forward_id] = _PendingCall(caller, service, provider, deadline_s, answer)
         provider.reply({"op": "call_service", "id": forward_id, "service": service,
                         "args": args})
 
@@ -261,7 +259,7 @@ class Services:
         try:
             values = response_values(self._providers_type(session, call.service),
                                      message.get("values", {}))
-        except self._bridge.refusals as error:  # the provider's answer does not fit the type
+        except self._context.refusals as error:  # the provider's answer does not fit the type
             call.answer(False, f"{call.service}: the provider's response does not fit its "
                                f"type: {shorten(str(error))}")
             raise BridgeError(f"service_response for {call.service}: {error}") from None
@@ -289,7 +287,7 @@ class Services:
             raise BridgeError(f"{service}: {error}") from None
         self._providers[service] = (session, type_name)
         session.services[service] = type_name
-        self._bridge.graph.offer_service(session, service, type_name, self._from_graph(service))
+        self._context.graph.offer_service(session, service, type_name, self._from_graph(service))
 
     def _unadvertise(self, session: Session, message: dict[str, Any]) -> None:
         service = message["service"]
@@ -300,7 +298,7 @@ class Services:
         session.services.pop(service, None)
         self._providers.pop(service, None)
         self._call_counts.pop(service, None)
-        self._bridge.graph.withdraw_service(service)
+        self._context.graph.withdraw_service(service)
         for call_id, call in list(self._pending.items()):
             if call.provider is session and call.service == service:
                 del self._pending[call_id]

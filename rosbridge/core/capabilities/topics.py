@@ -12,10 +12,11 @@ type it cannot import.
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable, Collection
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from rosbridge.core.clock import WALL_CLOCK, Clock
+from rosbridge.core.context import BridgeContext
 from rosbridge.core.encoding import cbor_raw_frame, png_frame, to_cbor, to_json
 from rosbridge.core.errors import BridgeError
 from rosbridge.core.fragments import fragment
@@ -24,9 +25,6 @@ from rosbridge.core.session import Session, Subscription
 from rosbridge.msgs import cdr
 from rosbridge.msgs import definitions as message_types
 from rosbridge.msgs.values import normalize_type
-
-if TYPE_CHECKING:
-    from rosbridge.core.bridge import Bridge
 
 log = logging.getLogger("websim.bridge")
 
@@ -54,10 +52,16 @@ class Encoded:
 
     A format is a compression (``schema.COMPRESSIONS``) and, for the JSON ones (``none``,
     ``png``), a ``fragment_size``: a longer text goes as its ``fragment`` frames.
+
+    Args:
+        topic: the topic it is published on.
+        msg: the message (canonical form).
+        clock: what stamps its ``cbor-raw`` frame (``stamp_s``; default: wall time).
     """
 
-    def __init__(self, topic: str, msg: Any) -> None:
+    def __init__(self, topic: str, msg: Any, clock: Clock = WALL_CLOCK) -> None:
         self.topic = topic
+        self._clock = clock
         self.envelope = {"op": "publish", "topic": topic, "msg": msg}
         self._json: str | None = None
         self._frames: dict[tuple[str, int | None], Frames] = {}
@@ -101,20 +105,21 @@ class Encoded:
             return to_json({"op": "status", "level": "error",
                             "msg": f"cbor-raw: a message on {self.topic} cannot be sent as "
                                    f"CDR: {error}"})
-        return cbor_raw_frame(self.topic, data, time.time())
+        return cbor_raw_frame(self.topic, data, self._clock.stamp_s())
 
 
 class Topics:
     """The topic capability of one bridge.
 
     Args:
-        bridge: the bridge it belongs to (sessions, clock, errors, the graph relay).
+        context: what it shares with the bridge's other capabilities (sessions, clock,
+            faults, refusals, the graph port).
     """
 
     OPS = ("advertise", "unadvertise", "publish", "subscribe", "unsubscribe")
 
-    def __init__(self, bridge: Bridge) -> None:
-        self._bridge = bridge
+    def __init__(self, context: BridgeContext) -> None:
+        self._context = context
         self._types: dict[str, str] = {}
         self._owned: set[str] = set()
         self._subscribers: dict[str, set[Session]] = {}
@@ -149,7 +154,7 @@ class Topics:
 
     def publish(self, topic: str, msg: Any, latch: bool = False) -> None:
         """Send an in-process message (the robot's, the ROS graph's) to ``topic``'s clients."""
-        encoded = Encoded(topic, msg)
+        encoded = Encoded(topic, msg, self._context.clock)
         if latch:
             self._latched[topic] = encoded
         self._deliver([encoded])
@@ -162,7 +167,8 @@ class Topics:
         tick was due (monotonic s), the time throttles measure against, so a tick that runs
         late does not make a throttled client miss its message.
         """
-        self._deliver([Encoded(topic, msg) for topic, msg in messages], tick_s)
+        self._deliver([Encoded(topic, msg, self._context.clock) for topic, msg in messages],
+                      tick_s)
 
     def has_subscribers(self, topic: str) -> bool:
         """Whether any client subscribes to ``topic``."""
@@ -175,6 +181,13 @@ class Topics:
     def subscribed_topics(self) -> Collection[str]:
         """Topics some client subscribes to (a live view: do not keep it)."""
         return self._subscribers.keys()
+
+    def relayed_topics(self) -> list[str]:
+        """Topics some client subscribes to that the simulator does not publish.
+
+        What a ROS graph, once attached, is asked for (``GraphPort.attach``).
+        """
+        return [topic for topic in self._subscribers if topic not in self._owned]
 
     def owned(self) -> frozenset[str]:
         """Topics only in-process endpoints publish."""
@@ -211,14 +224,14 @@ class Topics:
         self._refuse_owned(topic)
         type_name = self._known_type(topic, message["type"])
         try:
-            message_types.check_type(type_name, graph=self._bridge.graph.attached)
-        except self._bridge.refusals as error:
+            message_types.check_type(type_name, graph=self._context.graph.attached)
+        except self._context.refusals as error:
             raise BridgeError(f"advertise {topic}: {error}") from None
         self._types[topic] = type_name
         session.advertised.setdefault(topic, {})[message.get("id")] = type_name
         if message.get("latch"):
             self._latching.add((session, topic))
-        self._bridge.graph.advertise(session, topic, type_name)
+        self._context.graph.advertise(session, topic, type_name)
 
     def _unadvertise(self, session: Session, message: dict[str, Any]) -> None:
         topic = message["topic"]
@@ -234,12 +247,12 @@ class Topics:
             return
         self._latching.discard((session, topic))
         still_used = topic in self._owned or topic in self._local or any(
-            topic in other.advertised for other in self._bridge.sessions)
+            topic in other.advertised for other in self._context.sessions)
         if not still_used:
             self._types.pop(topic, None)
             self._latched.pop(topic, None)
-        if not any(topic in other.advertised for other in self._bridge.sessions):
-            self._bridge.graph.unadvertise(topic)
+        if not any(topic in other.advertised for other in self._context.sessions):
+            self._context.graph.unadvertise(topic)
 
     # ---- publish --------------------------------------------------------------------------
 
@@ -253,8 +266,8 @@ class Topics:
                               "advertised (advertise it with its type first)")
         msg = message["msg"]
         try:
-            msg = message_types.canonical(type_name, msg, graph=self._bridge.graph.attached)
-        except self._bridge.refusals as error:
+            msg = message_types.canonical(type_name, msg, graph=self._context.graph.attached)
+        except self._context.refusals as error:
             raise BridgeError(f"publish to {topic}: {error}") from None
         size = session.frame_bytes  # what arrived: known before anything is encoded
         latch = bool(message.get("latch")) or (session, topic) in self._latching
@@ -268,14 +281,14 @@ class Topics:
         for callback in self._local.get(topic, ()):
             try:
                 callback(msg, session)
-            except self._bridge.refusals as error:
+            except self._context.refusals as error:
                 raise BridgeError(f"{topic}: {error}") from None
-        self._published_s[session] = self._bridge.clock()
-        encoded = Encoded(topic, msg)
+        self._published_s[session] = self._context.clock.monotonic_s()
+        encoded = Encoded(topic, msg, self._context.clock)
         if latch:
             self._latched[topic] = encoded
         self._deliver([encoded])
-        self._bridge.graph.publish(session, topic, type_name, msg)
+        self._context.graph.publish(session, topic, type_name, msg)
 
     def _inferred_type(self, topic: str) -> str | None:
         """A publish without advertise: the type ``topic`` is known to carry (rosbridge).
@@ -285,7 +298,7 @@ class Topics:
         """
         known = self._type_of(topic)
         if known is None:
-            known = self._bridge.graph.topic_types().get(topic)
+            known = self._context.graph.topic_types().get(topic)
         return known
 
     def _type_of(self, topic: str) -> str | None:
@@ -299,7 +312,7 @@ class Topics:
         clients that only watch, whose writes wait for the end of the tick. ``now_s``: the
         time throttles measure against (default: the clock).
         """
-        now = self._bridge.clock() if now_s is None else now_s
+        now = self._context.clock.monotonic_s() if now_s is None else now_s
         audiences = [(encoded, subscribers) for encoded in messages
                      if (subscribers := self._subscribers.get(encoded.topic))]
         if not audiences:
@@ -338,12 +351,12 @@ class Topics:
             frame = encoded.frame(subscription.compression, session.fragment_size,
                                   self._type_of(topic))
         except (TypeError, ValueError) as error:  # a message no encoder can write
-            self._bridge.faults.record(f"encoding {topic}", error)
+            self._context.faults.record(f"encoding {topic}", error)
             return False
         try:
             session.outbox.put_topic(topic, frame, subscription.queue_in_force)
         except Exception as error:  # one client's fault is not the others'
-            self._bridge.faults.record(f"delivering {topic}", error)
+            self._context.faults.record(f"delivering {topic}", error)
         return True
 
     def _closing_loops(self, now: float) -> dict[Session, None]:
@@ -364,8 +377,8 @@ class Topics:
         if message.get("type"):
             try:
                 named_type = self._known_type(topic, message["type"])
-                message_types.check_type(named_type, graph=self._bridge.graph.attached)
-            except self._bridge.refusals as error:
+                message_types.check_type(named_type, graph=self._context.graph.attached)
+            except self._context.refusals as error:
                 raise BridgeError(f"subscribe {topic}: {error}") from None
         limits = session.limits
         throttle_ms = float(message.get("throttle_rate", 0))  # ranges: schema.OP_FIELDS
@@ -385,8 +398,9 @@ class Topics:
         if named_type is not None and topic not in self._types:
             self._subscribed_types.setdefault(topic, named_type)
         self._subscribers.setdefault(topic, set()).add(session)
-        self._bridge.graph.subscribe(session, topic, message.get("type") or
-                                     self._types.get(topic))
+        if topic not in self._owned:  # the simulator's own topics come from here only
+            self._context.graph.subscribe(session, topic,
+                                          message.get("type") or self._types.get(topic))
         latched = self._latched.get(topic)
         if latched is not None:
             _, length = subscription.effective()
@@ -421,4 +435,4 @@ class Topics:
             if not subscribers:
                 del self._subscribers[topic]
                 self._subscribed_types.pop(topic, None)
-                self._bridge.graph.unsubscribe(topic)
+                self._context.graph.unsubscribe(topic)
