@@ -48,6 +48,8 @@ class TopicSpec:
 
 CMD_VEL = TopicSpec("/cmd_vel", "geometry_msgs/msg/Twist", "in", 0, "reliable",
                     "velocity command: linear.x (m/s), angular.z (rad/s); the robot keeps the last")
+CMD_VEL_STAMPED_TYPE = "geometry_msgs/msg/TwistStamped"
+"""/cmd_vel's type when the robot takes it stamped (the node's ``cmd_vel_stamped``)."""
 ODOM = TopicSpec("/odom", "nav_msgs/msg/Odometry", "out", 1, "reliable",
                  "wheel odometry, frame odom, child base_link")
 SCAN = TopicSpec("/scan", "sensor_msgs/msg/LaserScan", "out", 2, "sensor_data",

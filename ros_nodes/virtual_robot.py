@@ -65,8 +65,15 @@ from ros_nodes.parameters import (
     ParameterSpec,
     parameter_spec,
 )
-from ros_nodes.robot_interface import CMD_VEL, PUBLISHED_TOPICS, RESET_SERVICE, TopicSpec
+from ros_nodes.robot_interface import (
+    CMD_VEL,
+    CMD_VEL_STAMPED_TYPE,
+    PUBLISHED_TOPICS,
+    RESET_SERVICE,
+    TopicSpec,
+)
 from ros_nodes.robot_messages import prefixed_frames
+from ros_nodes.tap import OUT
 from ros_nodes.virtual_robot_core import Publication, VirtualRobot
 from rosbridge.msgs.rclpy_conversion import (
     MessageConversionError,
@@ -75,7 +82,7 @@ from rosbridge.msgs.rclpy_conversion import (
     to_dict,
     to_message,
 )
-from rosbridge.msgs.values import stamp
+from rosbridge.msgs.values import Message, stamp
 
 NODE_NAME = "virtual_robot"
 """The node's name, as on the real robot."""
@@ -192,7 +199,7 @@ class VirtualRobotNode(Node):
         access: how to reach ``robot`` (default: directly; ``websim serve --ros`` passes one
             that runs on the server's event loop).
         own_timer: tick the robot with a 20 Hz timer; with False, whoever owns the robot
-            ticks it and the node publishes every tick's messages (``VirtualRobot.listeners``).
+            ticks it and the node publishes every tick's messages (``VirtualRobot.tap``).
         ignore_cmd_vel_from: a node whose /cmd_vel messages are ignored (the in-process
             rosbridge relay, whose commands the robot already got).
         frame_prefix: prefixed to every frame id the node publishes (``alice/`` gives
@@ -239,8 +246,7 @@ class VirtualRobotNode(Node):
         self._clock_publisher = (self.create_publisher(ClockMsg, "/clock", 10)
                                  if self._use_sim_time else None)
 
-        cmd_vel_type = "geometry_msgs/msg/TwistStamped" if self._cmd_vel_stamped \
-            else CMD_VEL.type
+        cmd_vel_type = CMD_VEL_STAMPED_TYPE if self._cmd_vel_stamped else CMD_VEL.type
         callback: Callable[..., None] = self._on_cmd_vel
         if ignore_cmd_vel_from:
             relay = PublisherFilter(self, CMD_VEL.name, ignore_cmd_vel_from)
@@ -261,7 +267,7 @@ class VirtualRobotNode(Node):
             self.create_timer(self.robot.sim.dt_s, self._tick,
                               clock=Clock(clock_type=ClockType.STEADY_TIME))
         else:
-            self.robot.listeners.append(self.publish)
+            self.robot.tap.add(self._publish_tapped)
         self.publish(self._access.call(self.robot.latched))
         sim = self.robot.sim
         self.get_logger().info(
@@ -371,11 +377,21 @@ class VirtualRobotNode(Node):
     def publish(self, publications: Sequence[Publication]) -> None:
         """Publish the robot's messages (dicts) on the ROS graph; thread-safe."""
         for spec, msg in publications:
-            publisher = self._robot_publishers.get(spec.name)
-            if publisher is not None:
-                if self._frame_prefix:
-                    msg = prefixed_frames(msg, self._frame_prefix)
-                publisher.publish(to_message(self._classes[spec.name], msg, strict=False))
+            self._publish_one(spec.name, msg)
+
+    def _publish_tapped(self, direction: str, topic: str, type_name: str, msg: Message,
+                        sim_time_s: float) -> None:
+        """The robot's tap: publish what it publishes (what it accepts came from a client)."""
+        if direction == OUT:
+            self._publish_one(topic, msg)
+
+    def _publish_one(self, topic: str, msg: Message) -> None:
+        """Publish one robot message (a dict) on the ROS graph, if the node has its type."""
+        publisher = self._robot_publishers.get(topic)
+        if publisher is not None:
+            if self._frame_prefix:
+                msg = prefixed_frames(msg, self._frame_prefix)
+            publisher.publish(to_message(self._classes[topic], msg, strict=False))
 
     def _on_cmd_vel(self, msg: Any) -> None:
         values, robot, stamped = to_dict(msg), self.robot, self._cmd_vel_stamped
@@ -398,8 +414,8 @@ class VirtualRobotNode(Node):
         robot = self._robot  # None if the constructor failed
         if robot is not None and self._on_robot_parameters_changed in robot.parameters.listeners:
             robot.parameters.listeners.remove(self._on_robot_parameters_changed)
-        if robot is not None and self.publish in robot.listeners:
-            robot.listeners.remove(self.publish)
+        if robot is not None:
+            robot.tap.remove(self._publish_tapped)
         super().destroy_node()
 
 

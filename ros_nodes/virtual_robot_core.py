@@ -6,12 +6,12 @@ publishes, at which tick and with which stamp, is decided in one place.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Container
+from collections.abc import Container
 from typing import Any
 
 from physics import Simulation
 from ros_nodes.parameters import RobotParameters
-from ros_nodes.robot_interface import TF_STATIC, WORLD, TopicSpec
+from ros_nodes.robot_interface import CMD_VEL, CMD_VEL_STAMPED_TYPE, TF_STATIC, WORLD, TopicSpec
 from ros_nodes.robot_messages import (
     BASE_FRAME,
     LASER_FRAME,
@@ -21,6 +21,7 @@ from ros_nodes.robot_messages import (
     world_markers_msg,
 )
 from ros_nodes.sensors import ROBOT_SENSORS, Sensor
+from ros_nodes.tap import IN, OUT, Tap
 from rosbridge.core.clock import Clock, WallClock
 from rosbridge.msgs.values import Message
 
@@ -43,8 +44,9 @@ class VirtualRobot:
     Attributes:
         clock: the clock the stamps come from, and its host's intervals.
         sensors: what it publishes per tick (``ros_nodes.sensors``).
-        listeners: called with every tick's publications, after ``step`` computed them (the
-            rclpy node of ``websim serve --ros`` publishes them on the ROS graph with one).
+        tap: sees every /cmd_vel the robot accepts and every message it publishes per tick
+            (``ros_nodes.tap``); while a callback listens, every message is built (the rclpy
+            node of ``websim serve --ros`` publishes them on the ROS graph through it).
     """
 
     def __init__(self, sim: Simulation, clock: Clock | None = None,
@@ -52,7 +54,7 @@ class VirtualRobot:
         self.sim = sim
         self.sensors = sensors
         self.parameters = RobotParameters(sim)
-        self.listeners: list[Callable[[list[Publication]], None]] = []
+        self.tap = Tap()
         self.clock: Clock = WallClock() if clock is None else clock
         self._ticks_since_command = 0
         self.collisions = 0
@@ -68,6 +70,9 @@ class VirtualRobot:
         linear, angular = twist_from_msg(msg, stamped=stamped)
         self.sim.command(linear, angular)
         self._ticks_since_command = 0
+        if self.tap.attached:
+            self.tap.emit(IN, CMD_VEL.name, CMD_VEL_STAMPED_TYPE if stamped else CMD_VEL.type,
+                          msg, self.sim.time_s)
 
     def step(self, wanted: Container[str] | None = None,
              shed: bool = False) -> list[Publication]:
@@ -76,7 +81,7 @@ class VirtualRobot:
         With ``cmd_vel_timeout_s`` > 0, a command older than that is replaced by a stop first.
 
         Args:
-            wanted: the topics whose messages to build (None: all; a listener gets all).
+            wanted: the topics whose messages to build (None: all; a tap gets all).
             shed: leave out the sheddable sensors (a late tick: /scan goes first).
         """
         self.advance()
@@ -100,9 +105,9 @@ class VirtualRobot:
         """The sensors due at the tick just advanced to whose topics are ``wanted``.
 
         Args:
-            wanted: the topics some client subscribes to (None: all; a listener gets all).
+            wanted: the topics some client subscribes to (None: all; a tap gets all).
         """
-        if self.listeners:
+        if self.tap.attached:
             wanted = None
         tick = self.sim.tick
         return [sensor for sensor in self.sensors
@@ -115,8 +120,10 @@ class VirtualRobot:
         out: list[Publication] = [(sensor.topic, sensor.build(self.sim, now_s))
                                   for sensor in self.due(wanted)
                                   if not (shed and sensor.sheddable)]
-        for listener in self.listeners:
-            listener(out)
+        if self.tap.attached:
+            time_s = self.sim.time_s
+            for spec, msg in out:
+                self.tap.emit(OUT, spec.name, spec.type, msg, time_s)
         return out
 
     def latched(self) -> list[Publication]:

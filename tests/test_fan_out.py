@@ -204,9 +204,9 @@ def test_only_the_messages_someone_subscribes_to_are_built() -> None:
     assert [spec.name for spec, _ in robot.step(wanted={"/odom"})] == ["/odom"]
     assert [spec.name for spec, _ in robot.step(wanted={"/odom", "/scan"})] == \
         ["/odom", "/scan"]  # the scan tick
-    heard: list[list[str]] = []
-    robot.listeners.append(lambda out: heard.append([spec.name for spec, _ in out]))
-    robot.step(wanted={"/odom"})  # a listener (the ROS node) gets everything
+    heard: list[list[str]] = [[]]
+    robot.tap.add(lambda direction, topic, *_: heard[-1].append(topic))
+    robot.step(wanted={"/odom"})  # a tap (the ROS node) gets everything
     assert heard == [["/odom", "/tf", "/ground_truth"]]
 
 

@@ -2,7 +2,8 @@
 
 Threads: the asyncio event loop of ``websim serve`` owns the simulation and the bridge, as
 without ROS; its tick loop stays the one clock, and each tick's messages go to the browser and,
-through ``VirtualRobotNode.publish`` (rclpy publishers are thread-safe), onto the ROS graph.
+through the robot's tap (``VirtualRobot.tap``, which the node listens to; rclpy publishers are
+thread-safe), onto the ROS graph.
 rclpy has no asyncio executor, so a ``SingleThreadedExecutor`` spins in one background thread;
 everything its callbacks do to the robot or the bridge is handed to the loop
 (``LoopAccess``), and whatever needs an answer (a parameter change, a reset) waits for it
