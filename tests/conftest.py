@@ -54,6 +54,19 @@ def ros(server: Any) -> Iterator[Any]:
 
 
 @pytest.fixture(scope="module")
+def bridge(server: Any) -> Iterator[Any]:
+    """A raw rosbridge client (page_helpers.Bridge) on the module's ``server``, recording
+    /odom and /cmd_vel: the robot's side of the web interface's browser tests."""
+    from page_helpers import Bridge
+
+    client = Bridge(server.ws_url)
+    client.subscribe("/odom")
+    client.subscribe("/cmd_vel")
+    yield client
+    client.close()
+
+
+@pytest.fixture(scope="module")
 def browser() -> Iterator[Any]:
     """Debian's chromium under Playwright; each launch gets a fresh temporary profile."""
     from chromium import launched_chromium

@@ -6,7 +6,7 @@ sees ``pointer: coarse``) at a common phone's size in CSS px. On each: the joyst
 first screen (sideways, Stop and the speed sliders beside it too), every control a finger can
 use is at least ``TOUCH_TARGET_PX`` square, the PID panel's status is never cut off, and nothing
 sticks out sideways; sideways, a drag on the joystick drives the robot, as seen on the bridge
-(``/odom``, ``/cmd_vel``). The bridge client and page helpers are test_web_interface's.
+(``/odom``, ``/cmd_vel``). The bridge client and page helpers come from page_helpers.py.
 
 Screenshots go to ``test-artifacts/phone-*.png``. They show the screen only (not the full page):
 for a full-page picture Playwright resizes the viewport, which then is neither sideways nor, in
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import pytest
-from test_web_interface import (
+from page_helpers import (
     LIBRARIES,
     Bridge,
     admin_context,
