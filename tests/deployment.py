@@ -1,0 +1,151 @@
+"""The Docker Compose deployment's files, read for the tests/test_deploy_*.py checks.
+
+docker-compose.yml, the Dockerfiles, ros2-bridge/'s rosbridge parameters and launch file, and
+web-interface/nginx.conf, parsed as Docker, rosbridge and nginx read them; where the tools
+(docker-compose, nginx, openssl) are. No Docker engine is needed, and no image is built.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import importlib.util
+import os
+import re
+import shutil
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import yaml
+
+from physics.params import PROJECT_DIR
+
+COMPOSE_FILE = PROJECT_DIR / "docker-compose.yml"
+BRIDGE_DIR = PROJECT_DIR / "ros2-bridge"
+WEB_DIR = PROJECT_DIR / "web-interface"
+NGINX_CONF = WEB_DIR / "nginx.conf"
+HTPASSWD_SCRIPT = WEB_DIR / "docker-entrypoint.d" / "40-websim-admin-htpasswd.sh"
+PARAMS_FILE = BRIDGE_DIR / "rosbridge_params.yaml"
+LAUNCH_FILE = BRIDGE_DIR / "websim.launch.py"
+
+BRIDGE = "ros2-web-bridge"
+WEB = "web-interface"
+CLASS_PROFILE = "class"
+CLASS_NGINX = "class-nginx"
+CLASS_NGINX_CONF = WEB_DIR / "nginx-class.conf"
+CLASS_CONF_TARGET = "/etc/nginx/nginx.conf"
+STUDENT_BRIDGE = "/rosbridge_websocket"
+ADMIN_BRIDGE = "/admin/rosbridge_websocket"
+ROSAPI = "/rosapi_node"
+
+DOCKER_COMPOSE = shutil.which("docker-compose")
+NGINX = shutil.which("nginx") or next(
+    (path for path in ("/usr/sbin/nginx",) if os.access(path, os.X_OK)), None)
+OPENSSL = shutil.which("openssl")
+
+
+# --- parsing helpers --------------------------------------------------------------------------
+
+def load_yaml(path: Path) -> Any:
+    return yaml.safe_load(path.read_text())
+
+
+def compose() -> dict[str, Any]:
+    return dict(load_yaml(COMPOSE_FILE))
+
+
+def default_services(services: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The services ``docker-compose up`` starts: those in no profile."""
+    services = compose()["services"] if services is None else services
+    return {name: body for name, body in services.items() if not body.get("profiles")}
+
+
+def class_workers(services: dict[str, Any] | None = None) -> list[str]:
+    """The class profile's worker services, class-worker-1, class-worker-2, ... in order."""
+    services = compose()["services"] if services is None else services
+    found = [name for name in services if re.fullmatch(r"class-worker-\d+", name)]
+    return sorted(found, key=lambda name: int(name.rpartition("-")[2]))
+
+
+def worker_script(service: str) -> str:
+    """A class worker's ``sh -c`` script, as its container runs it (compose's ``$$`` is $)."""
+    command = compose()["services"][service]["command"]
+    assert command[:2] == ["sh", "-c"], command
+    return str(command[2]).replace("$$", "$")
+
+
+def option(script: str, name: str) -> str:
+    """The value after ``--name`` in a command line."""
+    found = re.search(rf"--{name} (\S+)", script)
+    assert found, f"no --{name} in {script!r}"
+    return found[1]
+
+
+def compose_env(**values: str) -> dict[str, str]:
+    """This process's environment without compose's variables, plus ``values``."""
+    env = {key: value for key, value in os.environ.items()
+           if not key.startswith(("ADMIN_", "CLASS_", "ROS_DISTRO"))}
+    return {**env, **values}
+
+
+def dockerfile(path: Path) -> list[tuple[str, str]]:
+    """(INSTRUCTION, arguments) of a Dockerfile: continuations joined, comments dropped."""
+    instructions: list[tuple[str, str]] = []
+    pending = ""
+    for raw in path.read_text().splitlines():
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        if line.endswith("\\"):
+            pending += line[:-1] + " "
+            continue
+        keyword, _, arguments = (pending + line).partition(" ")
+        instructions.append((keyword.upper(), " ".join(arguments.split())))
+        pending = ""
+    assert not pending, f"{path}: dangling line continuation"
+    return instructions
+
+
+def build_of(service: str) -> tuple[Path, Path]:
+    """(build context, Dockerfile) of a compose service."""
+    build = compose()["services"][service]["build"]
+    if isinstance(build, str):
+        build = {"context": build}
+    context = (PROJECT_DIR / build["context"]).resolve()
+    return context, context / build.get("dockerfile", "Dockerfile")
+
+
+def parse_glob(value: str) -> list[str]:
+    """A glob parameter as rosbridge and rosapi parse it: "[a, b]" -> ["a", "b"]."""
+    assert value.startswith("[") and value.endswith("]"), value
+    return [item.strip().strip("'") for item in value[1:-1].split(",")
+            if item.strip().strip("'")]
+
+
+def node_params() -> dict[str, dict[str, Any]]:
+    """ros__parameters per fully qualified node name."""
+    return {"/" + name.lstrip("/"): body["ros__parameters"]
+            for name, body in load_yaml(PARAMS_FILE).items()}
+
+
+def allowed(globs: list[str], name: str) -> bool:
+    return any(fnmatch.fnmatch(name, pattern) for pattern in globs)
+
+
+def student_services() -> list[str]:
+    """The students' service globs, with the /rosapi/* rosbridge always adds."""
+    return [*parse_glob(node_params()[STUDENT_BRIDGE]["services_glob"]), "/rosapi/*"]
+
+
+def nginx_upstreams() -> dict[str, tuple[str, int]]:
+    """nginx's `set $NAME HOST:PORT;` upstream variables."""
+    found = re.findall(r"set \$(\w+) ([\w.-]+):(\d+);", NGINX_CONF.read_text())
+    return {name: (host, int(port)) for name, host, port in found}
+
+
+def load_healthcheck() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("healthcheck", BRIDGE_DIR / "healthcheck.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

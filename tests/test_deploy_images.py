@@ -1,0 +1,165 @@
+"""The Dockerfiles and the compose file agree with each other and with the repository: no
+amd64 pins, the ROS distribution an argument, build contexts that hold every COPY source and
+everything the pages load, health checks repeated in compose, and a launch file that starts the
+robot and the nodes the rosbridge parameters configure.
+
+No image is built here: the Dockerfiles' RUN steps (apt, pip, npm) are not exercised.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+import re
+from pathlib import Path
+
+import pytest
+import yaml
+from deployment import (
+    ADMIN_BRIDGE,
+    BRIDGE,
+    BRIDGE_DIR,
+    HTPASSWD_SCRIPT,
+    LAUNCH_FILE,
+    ROSAPI,
+    STUDENT_BRIDGE,
+    WEB,
+    WEB_DIR,
+    build_of,
+    compose,
+    dockerfile,
+    node_params,
+)
+
+from physics.params import PROJECT_DIR
+
+
+def test_nothing_is_tied_to_amd64() -> None:
+    """The Pi 4B is arm64: no platform pins, no architecture-specific downloads."""
+    texts = {"docker-compose.yml": yaml.safe_dump(compose())}
+    for service in (BRIDGE, WEB):
+        _, path = build_of(service)
+        texts[str(path)] = "\n".join(" ".join(pair) for pair in dockerfile(path))
+    for name, text in texts.items():
+        for marker in ("platform", "amd64", "x86_64", "x86-64"):
+            assert marker not in text.lower(), f"{name} mentions {marker}"
+
+
+def test_bridge_dockerfile_uses_the_distro_argument_everywhere() -> None:
+    instructions = dockerfile(BRIDGE_DIR / "Dockerfile")
+    assert instructions[0] == ("ARG", "ROS_DISTRO=humble")
+    froms = [args for keyword, args in instructions if keyword == "FROM"]
+    assert froms == ["ros:${ROS_DISTRO}-ros-base"]
+    runs = " ".join(args for keyword, args in instructions if keyword == "RUN")
+    assert "ros-${ROS_DISTRO}-rosbridge-server" in runs
+    assert not re.search(r"ros-(humble|jazzy|iron|rolling)-", runs), "a distro spelled out"
+    cmd = json.loads(dict(instructions)["CMD"])
+    assert cmd[:2] == ["ros2", "launch"]
+    assert Path(cmd[2]).name == LAUNCH_FILE.name
+
+
+def test_web_dockerfile_builds_vendor_files_with_npm_ci_and_serves_with_nginx() -> None:
+    instructions = dockerfile(WEB_DIR / "Dockerfile")
+    froms = [args for keyword, args in instructions if keyword == "FROM"]
+    assert len(froms) == 2
+    assert froms[0].startswith("node:") and froms[0].endswith(" AS vendor")
+    assert froms[1].startswith("nginx:")
+    runs = [args for keyword, args in instructions if keyword == "RUN"]
+    assert any(run.startswith("npm ci") for run in runs)
+    copies = [args for keyword, args in instructions if keyword == "COPY"]
+    assert "nginx.conf /etc/nginx/nginx.conf" in copies
+    assert f"docker-entrypoint.d/{HTPASSWD_SCRIPT.name} /docker-entrypoint.d/" in copies
+    assert any(copy.startswith("--from=vendor ") and "node_modules" in copy for copy in copies)
+
+
+@pytest.mark.parametrize("service", [BRIDGE, WEB])
+def test_every_copy_source_exists_in_the_build_context(service: str) -> None:
+    context, path = build_of(service)
+    for keyword, args in dockerfile(path):
+        if keyword != "COPY" or args.startswith("--from="):
+            continue
+        *sources, _destination = [word for word in args.split() if not word.startswith("--")]
+        for source in sources:
+            assert list(context.glob(source.rstrip("/"))), f"{path}: COPY {source}: no such file"
+
+
+def published_sources() -> list[str]:
+    """What web-interface/Dockerfile copies from the build context into nginx's web root."""
+    sources: list[str] = []
+    in_root = False
+    for keyword, args in dockerfile(WEB_DIR / "Dockerfile"):
+        if keyword == "WORKDIR":
+            in_root = args == "/usr/share/nginx/html"
+        elif keyword == "COPY" and in_root and not args.startswith("--from="):
+            sources += args.split()[:-1]
+    return sources
+
+
+def page_references() -> set[str]:
+    """Web-root paths the pages and their modules load (src, href, import ... from)."""
+    references: set[str] = set()
+    for page in WEB_DIR.glob("*.html"):
+        for url in re.findall(r'(?:src|href)="([^"#?]*)', page.read_text()):
+            if not re.match(r"[a-z]+:|/|$", url):
+                references.add(url.removeprefix("./"))
+    for module in (WEB_DIR / "js").glob("*.js"):
+        for url in re.findall(r"""from ['"](\.{1,2}/[^'"]+)['"]""", module.read_text()):
+            references.add(str((module.parent / url).resolve().relative_to(WEB_DIR)))
+    return references
+
+
+def test_everything_the_pages_load_is_in_the_image() -> None:
+    routes = {"", "admin"}  # nginx locations, not files
+    sources = published_sources()
+    missing = []
+    for path in sorted(page_references() - routes):
+        if path.startswith("node_modules/"):  # the vendor stage's npm ci
+            installed = (WEB_DIR / "node_modules").exists()
+            published = not installed or (WEB_DIR / path).is_file()
+        else:
+            published = (WEB_DIR / path).is_file() and any(
+                fnmatch.fnmatch(path, source) or path.startswith(source.rstrip("/") + "/")
+                for source in sources)
+        if not published:
+            missing.append(path)
+    assert not missing, f"loaded by the pages but not in the image: {missing}"
+
+
+def test_docker_pages_send_the_admin_page_to_the_password_protected_bridge() -> None:
+    config = json.loads((WEB_DIR / "config.docker.json").read_text())
+    assert config["adminWs"] == "/admin/rosbridge" and config["ws"] is None
+    dockerfile = (WEB_DIR / "Dockerfile").read_text()
+    assert "COPY config.docker.json config.json" in dockerfile
+    nginx = (WEB_DIR / "nginx.conf").read_text()
+    assert "location ^~ /admin" in nginx and "location = /admin/rosbridge" in nginx
+
+
+@pytest.mark.parametrize("service", [BRIDGE, WEB])
+def test_compose_healthcheck_is_the_images_healthcheck(service: str) -> None:
+    """The image carries its HEALTHCHECK (docker run); compose repeats it (docker-compose ps)."""
+    _, path = build_of(service)
+    line = dict(dockerfile(path))["HEALTHCHECK"]
+    options, _, command = line.partition(" CMD ")
+    in_image = dict(option.removeprefix("--").split("=") for option in options.split())
+    in_compose = compose()["services"][service]["healthcheck"]
+    assert in_compose["test"] == ["CMD", *json.loads(command)]
+    for key in ("interval", "timeout", "start-period", "retries"):
+        assert str(in_compose[key.replace("-", "_")]) == in_image[key], key
+
+
+def test_launch_file_starts_the_robot_and_the_nodes_the_params_file_configures() -> None:
+    source = LAUNCH_FILE.read_text()
+    compile(source, str(LAUNCH_FILE), "exec")
+    assert '["websim-robot"]' in source
+    nodes = re.findall(r'Node\(package="(\w+)", executable="(\w+)",\s*name="(\w+)"'
+                       r'(?:, namespace="(\w+)")?', source)
+    qualified = {f"/{namespace}/{name}" if namespace else f"/{name}"
+                 for _, _, name, namespace in nodes}
+    assert qualified == set(node_params()) == {STUDENT_BRIDGE, ADMIN_BRIDGE, ROSAPI}
+    assert source.count("on_exit=Shutdown(") == 4
+
+
+def test_the_robot_console_script_the_launch_file_runs_is_declared() -> None:
+    pyproject = (PROJECT_DIR / "pyproject.toml").read_text()
+    assert re.search(r'^websim-robot = "', pyproject, re.MULTILINE), \
+        "pyproject.toml [project.scripts] has no websim-robot"
