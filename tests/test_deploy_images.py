@@ -75,12 +75,15 @@ def test_web_dockerfile_builds_vendor_files_with_npm_ci_and_serves_with_nginx() 
 @pytest.mark.parametrize("service", [BRIDGE, WEB])
 def test_every_copy_source_exists_in_the_build_context(service: str) -> None:
     context, path = build_of(service)
+    checked = []
     for keyword, args in dockerfile(path):
         if keyword != "COPY" or args.startswith("--from="):
             continue
         *sources, _destination = [word for word in args.split() if not word.startswith("--")]
         for source in sources:
             assert list(context.glob(source.rstrip("/"))), f"{path}: COPY {source}: no such file"
+            checked.append(source)
+    assert checked, f"{path}: no COPY from the build context found: nothing was checked"
 
 
 def published_sources() -> list[str]:
@@ -112,7 +115,10 @@ def test_everything_the_pages_load_is_in_the_image() -> None:
     routes = {"", "admin"}  # nginx locations, not files
     sources = published_sources()
     missing = []
-    for path in sorted(page_references() - routes):
+    loaded = sorted(page_references() - routes)
+    assert {"js/main.js", "js/admin.js", "css/style.css"} <= set(loaded), \
+        f"the pages' own files are missing from what they were found to load: {loaded}"
+    for path in loaded:
         if path.startswith("node_modules/"):  # the vendor stage's npm ci
             installed = (WEB_DIR / "node_modules").exists()
             published = not installed or (WEB_DIR / path).is_file()

@@ -25,10 +25,11 @@ from ros_nodes.robot_interface import ROBOT_TOPICS
 
 def test_globs_are_nonempty_lists() -> None:
     """An empty list means "everything" to the Humble release of rosbridge."""
-    for node, params in node_params().items():
-        for key, value in params.items():
-            if key.endswith("_glob"):
-                assert parse_glob(value), f"{node} {key} is empty"
+    globs = [(node, key, value) for node, params in node_params().items()
+             for key, value in params.items() if key.endswith("_glob")]
+    assert {node for node, _, _ in globs} == {STUDENT_BRIDGE, ADMIN_BRIDGE, ROSAPI}, globs
+    for node, key, value in globs:
+        assert parse_glob(value), f"{node} {key} is empty"
 
 
 def test_students_reach_the_robots_topics_and_nothing_else() -> None:
