@@ -1,7 +1,8 @@
 // /class: the instructor's dashboard. Every robot of a class live in one grid, on the
-// instructor's root connection (class-root.js), where robot NAME's topics and services are
-// under /NAME: ONE WebSocket to a single process, or one per worker for a class spread over
-// workers behind nginx (class-workers.js, class-roots.js). This module only wires the others:
+// instructor's root connections (class-root-connections.js; why one would not open:
+// class-root-reasons.js), where robot NAME's topics and services are under /NAME: ONE
+// WebSocket to a single process, or one per worker for a class spread over workers behind
+// nginx (class-workers.js). This module only wires the others:
 // the token (class-token.js), the robots' topics (class-feed.js), their status
 // (class-poller.js), the commands (class-commands.js) and the grid (class-grid.js), drawn in
 // one animation loop.
@@ -11,9 +12,9 @@ import { loadSiteConfig } from './connection.js';
 import { runFrameLoop } from './connection-bar.js';
 import { loadRobot, parameterSpec } from './robot.js';
 import { rootWsUrl } from './class-plan.js';
-import { explainNoRobots, NEEDS_TOKEN, probeHealth } from './class-root.js';
+import { explainNoRobots, NEEDS_TOKEN, probeHealth } from './class-root-reasons.js';
 import { loadWorkers, rootTargets } from './class-workers.js';
-import { ClassRoots, rootsBadge, rootsMessage } from './class-roots.js';
+import { ClassRoots, rootsBadge, rootsMessage } from './class-root-connections.js';
 import { bindTokenCard, instructorToken } from './class-token.js';
 import { ClassFeed } from './class-feed.js';
 import { StatusPoller } from './class-poller.js';

@@ -1,13 +1,13 @@
-// The instructor's root connection (web-interface/js/class-root.js, class-token.js): the token
-// taken once and sent only to the root, how each socket closed, and what the page says when
-// the root does not open.
+// Why the instructor's root connection would not open (web-interface/js/class-root-reasons.js)
+// and its token (class-token.js): the token taken once and sent only to the root, how each
+// socket closed, and what the page says when the root does not open.
 import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import { Connection, TOKEN_KEY } from '../../web-interface/js/connection.js';
 import {
   explainClosed, explainNoRobots, NEEDS_TOKEN, observedRoslib, probeHealth,
-} from '../../web-interface/js/class-root.js';
+} from '../../web-interface/js/class-root-reasons.js';
 import { forgetToken, instructorToken, storeToken } from '../../web-interface/js/class-token.js';
 import { rootWsUrl } from '../../web-interface/js/class-plan.js';
 import { fakeRoslib } from './fake-roslib.mjs';

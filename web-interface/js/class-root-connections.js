@@ -7,7 +7,7 @@
 
 import { Connection, withoutToken } from './connection.js';
 import { ClassCommands } from './class-commands.js';
-import { explainClosed, explainWorkerClosed, observedRoslib } from './class-root.js';
+import { explainClosed, explainWorkerClosed, observedRoslib } from './class-root-reasons.js';
 
 const SEVERITY = Object.freeze({ ok: 0, info: 1, warn: 2, error: 3 });
 
@@ -120,11 +120,11 @@ export function rootsBadge(list) {
 
 /**
  * What the dashboard says about its roots, plus `extra` (a {kind, text} about the class, or
- * null): {message: {kind, lines} or null, askToken}. A root that did not open is explained by
- * class-root.js: explainClosed() while no root has opened with this token, and, with several
- * roots, explainWorkerClosed() once one has (the token is right). The token is asked for only
- * when every root has failed. Lines of several roots start with their label; kind is the
- * gravest.
+ * null): {message: {kind, lines} or null, askToken}. A root that did not open is explained
+ * by class-root-reasons.js: explainClosed() while no root has opened with this token, and,
+ * with several roots, explainWorkerClosed() once one has (the token is right). The token is
+ * asked for only when every root has failed. Lines of several roots start with their label;
+ * kind is the gravest.
  */
 export function rootsMessage(list, extra = null) {
   const tokenWorks = list.some((root) => root.opened);

@@ -1,4 +1,4 @@
-// The instructor's root connection, and what to say when it cannot open.
+// Why the instructor's root connection did not open, and what the dashboard says then.
 //
 // The root (ws://HOST:PORT/) admits only the instructor's token and refuses anything else at
 // the handshake, with its reason in an HTTP answer. A browser never shows a page that answer:

@@ -1,15 +1,15 @@
-// The dashboard's root connections (web-interface/js/class-roots.js) on a fake roslibjs: one
-// per worker, the token on each; a robot's subscriptions and calls over the root of the worker
-// that listed it, never another; one badge and one message for them all.
+// The dashboard's root connections (web-interface/js/class-root-connections.js) on a fake
+// roslibjs: one per worker, the token on each; a robot's subscriptions and calls over the root
+// of the worker that listed it, never another; one badge and one message for them all.
 import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
   ClassRoots, rootsBadge, rootsMessage, routedCommands,
-} from '../../web-interface/js/class-roots.js';
+} from '../../web-interface/js/class-root-connections.js';
 import { ClassFeed } from '../../web-interface/js/class-feed.js';
 import { CLASS_SERVICES } from '../../web-interface/js/class-plan.js';
-import { NEEDS_TOKEN } from '../../web-interface/js/class-root.js';
+import { NEEDS_TOKEN } from '../../web-interface/js/class-root-reasons.js';
 import { rootTargets } from '../../web-interface/js/class-workers.js';
 import { fakeRoslib } from './fake-roslib.mjs';
 import { robot } from './robot.mjs';
