@@ -14,9 +14,10 @@ from typing import Any
 
 from classroom.instructor_view import InstructorView
 from classroom.registry import Classroom
+from ros_nodes.robot_interface import ROBOTS_PREFIX
 from rosbridge.core.limits import ClientLimits, OriginPolicy
 from rosbridge.transport.connection import Hub
-from rosbridge.transport.front import ROBOTS_PREFIX, Destination, WebSocketFront
+from rosbridge.transport.front import Destination, WebSocketFront
 from rosbridge.transport.schedule import Schedule
 
 ROOT_REFUSAL = ("this server hosts a class: connect to ws://HOST:PORT/robots/NAME for robot "

@@ -59,10 +59,11 @@ class Lidar:
     def __init__(self, params: LidarParams, world_space: WorldSpace) -> None:
         self._params = params
         self._world_space = world_space
-        self._beam_angles_rad: FloatArray = params.angle_min_rad + np.arange(
+        beam_angles_rad = params.angle_min_rad + np.arange(
             params.num_rays, dtype=np.float64) * params.angle_increment_rad
-        self._beam_cos: FloatArray = np.cos(self._beam_angles_rad)
-        self._beam_sin: FloatArray = np.sin(self._beam_angles_rad)
+        self._beam_cos: FloatArray = np.cos(beam_angles_rad)
+        self._beam_sin: FloatArray = np.sin(beam_angles_rad)
+        """Each beam's direction in the laser frame (angle_min + i * angle_increment)."""
         self._directions_theta = math.nan
         self._directions = (self._beam_cos, self._beam_sin)
         walls = world_space.wall_shapes
@@ -95,11 +96,6 @@ class Lidar:
     def params(self) -> LidarParams:
         """The LiDAR's parameters."""
         return self._params
-
-    @property
-    def beam_angles_rad(self) -> FloatArray:
-        """Beam angles in the laser frame: angle_min + i * angle_increment (rad)."""
-        return self._beam_angles_rad
 
     def laser_pose(self, robot_pose: Pose2D) -> Pose2D:
         """The laser frame's pose in the map frame for a robot pose in the map frame."""

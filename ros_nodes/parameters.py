@@ -258,8 +258,6 @@ class RobotParameters:
 
     Args:
         sim: the simulation whose parameters these are.
-        on_change: called with the names set after every successful change (also appended
-            to ``listeners``).
 
     Attributes:
         listeners: called, in order, with the names set after every successful change (the
@@ -267,12 +265,9 @@ class RobotParameters:
         cmd_vel_timeout_s: the command watchdog (s); 0 is off. Read by ``VirtualRobot``.
     """
 
-    def __init__(self, sim: Simulation,
-                 on_change: Callable[[list[str]], None] | None = None) -> None:
+    def __init__(self, sim: Simulation) -> None:
         self._sim = sim
         self.listeners: list[Callable[[list[str]], None]] = []
-        if on_change is not None:
-            self.listeners.append(on_change)
         self.cmd_vel_timeout_s = CMD_VEL_TIMEOUT_OFF_S
 
     @staticmethod

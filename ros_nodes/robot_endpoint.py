@@ -13,7 +13,7 @@ from typing import Any
 from physics import ConfigError
 from ros_nodes.robot_interface import CMD_VEL, PUBLISHED_TOPICS
 from ros_nodes.robot_services import add_robot_services
-from ros_nodes.virtual_robot_core import Publication, VirtualRobot
+from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.session import Session
 
@@ -52,8 +52,3 @@ class RobotEndpoint:
             raise
         self.last_driver = publisher.peer
         self.last_drive_s = self.robot.clock.monotonic_s()
-
-    def publish(self, publications: list[Publication]) -> None:
-        """Send one tick's messages to the subscribers."""
-        for spec, msg in publications:
-            self.bridge.publish(spec.name, msg)

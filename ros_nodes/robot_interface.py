@@ -68,8 +68,15 @@ ROBOT_TOPICS = (CMD_VEL, ODOM, SCAN, TF, TF_STATIC, GROUND_TRUTH, WORLD)
 PUBLISHED_TOPICS = tuple(spec for spec in ROBOT_TOPICS if spec.direction == "out")
 """Topics only the simulator may publish."""
 
-NODE_NAME = "/virtual_robot"
-"""The robot node's name, as on the real robot and in the Docker stack."""
+ROBOTS_PREFIX = "/robots/"
+"""Where a class's robots are: robot NAME at ``ws://HOST:9090/robots/NAME``, its page at
+``http://HOST:8080/robots/NAME/`` (a single robot's server refuses these paths)."""
+
+NODE_BASENAME = "virtual_robot"
+"""The robot node's name, as on the real robot and in the Docker stack (what rclpy is given)."""
+
+NODE_NAME = f"/{NODE_BASENAME}"
+"""The robot node's fully qualified name (the root namespace)."""
 
 ROSOUT = TopicSpec("/rosout", "rcl_interfaces/msg/Log", "out", 0, "transient_local",
                    "the node's log lines (start, reset, parameter changes, refused commands)",

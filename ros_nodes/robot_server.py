@@ -4,13 +4,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from physics import TICK_PERIOD_S
 from ros_nodes.robot_host import RobotHost, TickStats
+from ros_nodes.robot_interface import ROBOTS_PREFIX
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.limits import ClientLimits, OriginPolicy
-from rosbridge.transport.front import ROBOTS_PREFIX, Destination, WebSocketFront
-from rosbridge.transport.schedule import Schedule
+from rosbridge.transport.front import Destination, WebSocketFront
 
 
 class SimServer(WebSocketFront):
@@ -19,16 +18,15 @@ class SimServer(WebSocketFront):
     Args:
         robot: the virtual robot to run.
         admin_token: the secret that grants admin rights (``?token=`` in the URL).
-        period_s: tick period (s).
         limits: the bounds every client lives within.
         origins: which web pages may connect; None: any (tests and benchmarks).
     """
 
     def __init__(self, robot: VirtualRobot, admin_token: str,
-                 period_s: float = TICK_PERIOD_S, limits: ClientLimits | None = None,
+                 limits: ClientLimits | None = None,
                  origins: OriginPolicy | None = None) -> None:
         super().__init__(admin_token, limits, origins)
-        self.host = RobotHost(robot, Schedule(period_s))
+        self.host = RobotHost(robot)
 
     @property
     def robot(self) -> VirtualRobot:

@@ -46,13 +46,14 @@ from rosbridge.core.capabilities.services import ServiceHandler, ViaGraph
 from rosbridge.core.encoding import parse_json
 from rosbridge.core.errors import ServiceError, shorten
 from rosbridge.core.session import Session
+from rosbridge.graph.names import RELAY_NODE_NAME
 from rosbridge.msgs import typedefs
 from rosbridge.msgs.values import normalize_service_type, normalize_type, stamp
 
 PREFIX = "/rosapi/"
 """Where rosapi's services live (its ``use_private_service_names`` default)."""
 
-BRIDGE_NODE = "/rosbridge_websocket"
+BRIDGE_NODE = f"/{RELAY_NODE_NAME}"
 ROSAPI_NODE = "/rosapi"
 ROSAPI_PARAMS_NODE = "/rosapi_params"
 """The nodes of a rosbridge deployment beside the robot (rosbridge_websocket_launch.xml)."""

@@ -21,7 +21,13 @@ from collections.abc import Sequence
 from typing import Any
 
 from ros_nodes.parameters import parameter_value_msg, shorten_value
-from ros_nodes.robot_interface import NODE_NAME, NODE_TOPICS, PARAMETER_EVENTS, ROSOUT
+from ros_nodes.robot_interface import (
+    NODE_BASENAME,
+    NODE_NAME,
+    NODE_TOPICS,
+    PARAMETER_EVENTS,
+    ROSOUT,
+)
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.limits import TokenBucket
@@ -30,7 +36,7 @@ from rosbridge.msgs.values import Message, stamp
 DEBUG, INFO, WARN, ERROR, FATAL = 10, 20, 30, 40, 50
 """``rcl_interfaces/msg/Log`` severity levels."""
 
-LOGGER_NAME = NODE_NAME.lstrip("/")
+LOGGER_NAME = NODE_BASENAME
 """The Log ``name`` field: rclpy names a node's logger after the node, without the slash."""
 
 LOG_RATE_PER_S = 5.0

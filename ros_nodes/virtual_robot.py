@@ -68,6 +68,7 @@ from ros_nodes.parameters import (
 from ros_nodes.robot_interface import (
     CMD_VEL,
     CMD_VEL_STAMPED_TYPE,
+    NODE_BASENAME,
     PUBLISHED_TOPICS,
     RESET_SERVICE,
     TopicSpec,
@@ -83,9 +84,6 @@ from rosbridge.msgs.rclpy_conversion import (
     to_message,
 )
 from rosbridge.msgs.values import Message, stamp
-
-NODE_NAME = "virtual_robot"
-"""The node's name, as on the real robot."""
 
 TF_MISSING_WARNING = (
     "tf2_msgs is not installed, so /tf and /tf_static are not published: it is not on PyPI. "
@@ -215,7 +213,7 @@ class VirtualRobotNode(Node):
     def __init__(self, robot: VirtualRobot | None = None, *, access: RobotAccess | None = None,
                  own_timer: bool = True, ignore_cmd_vel_from: str | None = None,
                  frame_prefix: str = "", **node_kwargs: Any) -> None:
-        super().__init__(NODE_NAME, **node_kwargs)
+        super().__init__(NODE_BASENAME, **node_kwargs)
         self._frame_prefix = frame_prefix
         self._access: RobotAccess = access or DirectAccess()
         self._ticks = 0

@@ -41,6 +41,7 @@ from urllib.parse import urlsplit
 from aiohttp import web
 from aiohttp.abc import AbstractAccessLogger
 
+from ros_nodes.robot_interface import ROBOTS_PREFIX
 from websim.web_files import CONTENT_TYPES, published
 
 log = logging.getLogger("websim.http")
@@ -57,8 +58,6 @@ GZIP_LEVEL = 5
 """zlib level: the largest file (uPlot, 145 kB) in ~3 ms on the loop, within 2 % of level 9's
 size; once per file and change."""
 
-ROBOTS_PREFIX = "/robots/"
-"""A class's robot pages: ``/robots/NAME/`` is the page, ``/robots/NAME/admin`` its admin."""
 
 LIVE_DOCUMENTS = ("/robot.json", "/config.json")
 """Documents the server may fill itself (``LiveDocuments``) instead of serving the file."""

@@ -30,7 +30,8 @@ from ros_nodes.virtual_robot import VirtualRobotNode
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge
 from rosbridge.graph.actions import RosActions
-from rosbridge.graph.relay import RELAY_NODE_NAME, GraphRelay, LoopAccess
+from rosbridge.graph.names import RELAY_NODE_NAME
+from rosbridge.graph.relay import GraphRelay, LoopAccess
 from rosbridge.graph.services import GraphServices
 from rosbridge.msgs.values import Message
 

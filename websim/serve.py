@@ -22,9 +22,11 @@ from typing import Protocol
 
 from classroom.registry import DEFAULT_IDLE_PAUSE_S, DEFAULT_MAX_ROBOTS
 from physics.shipped import shipped
+from ros_nodes.robot_interface import NODE_NAME
 from ros_nodes.robot_server import SimServer
 from rosbridge.core.limits import ClientLimits, OriginPolicy
 from rosbridge.core.schema import NAME_TOKEN
+from rosbridge.graph.names import RELAY_NODE_NAME
 from rosbridge.transport.front import start_websocket
 from websim.http_server import start_http
 from websim.lan import lan_addresses, qr_lines
@@ -189,10 +191,10 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     if ros is not None:
         domain = os.environ.get("ROS_DOMAIN_ID", "0")
         if robot is not None:
-            print(f"  ROS 2:     node /virtual_robot and relay /rosbridge_websocket on "
+            print(f"  ROS 2:     node {NODE_NAME} and relay /{RELAY_NODE_NAME} on "
                   f"ROS_DOMAIN_ID {domain}", flush=True)
         else:
-            print(f"  ROS 2:     node /NAME/virtual_robot per robot, topics under /NAME, "
+            print(f"  ROS 2:     node /NAME{NODE_NAME} per robot, topics under /NAME, "
                   f"frames NAME/odom, NAME/base_link, NAME/laser, on ROS_DOMAIN_ID {domain}",
                   flush=True)
     if args.host in ("0.0.0.0", "::"):

@@ -26,11 +26,12 @@ from classroom.registry import (
 from physics import ConfigError, LidarParams, RobotParams
 from ros_nodes.robot_description import robot_json
 from ros_nodes.robot_host import RobotHost
+from ros_nodes.robot_interface import ROBOTS_PREFIX
 from ros_nodes.robot_server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.clock import Clock
 from rosbridge.core.limits import ClientLimits, OriginPolicy
-from rosbridge.transport.front import ROBOTS_PREFIX, WebSocketFront
+from rosbridge.transport.front import WebSocketFront
 
 
 @dataclass

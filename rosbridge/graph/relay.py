@@ -50,9 +50,6 @@ from rosbridge.msgs.values import Message, normalize_type
 
 log = logging.getLogger("websim.ros")
 
-RELAY_NODE_NAME = "rosbridge_websocket"
-"""The relay node's name, as rosbridge_server's."""
-
 CALL_TIMEOUT_S = 2.0
 """How long an rclpy callback waits for the event loop to answer (a parameter change)."""
 

@@ -46,9 +46,6 @@ MAX_INCOMING_FRAMES = 2
 """Frames websockets buffers per client before it stops reading the socket (so a client
 whose handling budget is spent holds at most this many frames of server memory)."""
 
-ROBOTS_PREFIX = "/robots/"
-"""Where a class's robots are: ``ws://HOST:9090/robots/NAME``."""
-
 
 
 class Destination(Protocol):
