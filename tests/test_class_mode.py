@@ -23,6 +23,7 @@ from typing import Any
 
 import pytest
 import websockets
+from robot_rig import robot_rig
 
 from classroom.registry import (
     Classroom,
@@ -32,7 +33,6 @@ from classroom.registry import (
     read_roster,
 )
 from physics import ConfigError, Simulation, load_world
-from ros_nodes.robot_host import RobotHost
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.session import Session
 
@@ -307,7 +307,7 @@ def test_a_robot_nobody_uses_pauses_and_resumes_with_its_state(tmp_path: Path) -
 # ---- in-process: one schedule, scans only when wanted ----------------------------------------
 
 def test_a_scan_is_cast_only_when_someone_subscribes_to_it() -> None:
-    host = RobotHost(VirtualRobot(Simulation(load_world("maze"), seed=0)))
+    host = robot_rig("maze").host
     for _ in range(10):
         host.tick()
     assert host.stats.scans_cast == 0

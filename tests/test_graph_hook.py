@@ -11,11 +11,11 @@ from collections.abc import Mapping
 from typing import Any
 
 import pytest
+from robot_rig import robot_rig
 
 from physics import ConfigError, RobotParams, Simulation, load_world
-from ros_nodes.robot_endpoint import RobotEndpoint
 from ros_nodes.virtual_robot_core import VirtualRobot
-from rosbridge.core.bridge import Bridge, BridgeError, Session
+from rosbridge.core.bridge import BridgeError, Session
 from rosbridge.core.outbox import Outbox
 
 TWIST = {"linear": {"x": 0.3, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
@@ -57,9 +57,8 @@ class RecordingGraph:
 
 class Rig:
     def __init__(self, graph: RecordingGraph | None = None) -> None:
-        self.robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
-        self.bridge = Bridge()
-        RobotEndpoint(self.bridge, self.robot)
+        rig = robot_rig()
+        self.robot, self.bridge = rig.robot, rig.bridge
         self.graph = graph or RecordingGraph()
         self.bridge.graph.attach(self.graph)
 
