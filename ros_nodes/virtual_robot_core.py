@@ -1,7 +1,8 @@
 """The virtual robot without a transport: /cmd_vel in, ROS-shaped messages out, per tick.
 
 The embedded rosbridge server and the rclpy node both wrap this class, so what the robot
-publishes, at which tick and with which stamp, is decided in one place.
+publishes (its sensors, ``ros_nodes.sensors``), at which tick and with which stamp (its one
+clock) is decided in one place; its tap (``ros_nodes.tap``) sees what crosses it both ways.
 """
 
 from __future__ import annotations
