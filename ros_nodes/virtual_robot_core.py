@@ -75,18 +75,16 @@ class VirtualRobot:
             self.tap.emit(IN, CMD_VEL.name, CMD_VEL_STAMPED_TYPE if stamped else CMD_VEL.type,
                           msg, self.sim.time_s)
 
-    def step(self, wanted: Container[str] | None = None,
-             shed: bool = False) -> list[Publication]:
+    def step(self, wanted: Container[str] | None = None) -> list[Publication]:
         """Advance one tick and return the messages due at it (``advance``, ``publications``).
 
         With ``cmd_vel_timeout_s`` > 0, a command older than that is replaced by a stop first.
 
         Args:
             wanted: the topics whose messages to build (None: all; a tap gets all).
-            shed: leave out the sheddable sensors (a late tick: /scan goes first).
         """
         self.advance()
-        return self.publications(wanted, shed)
+        return self.publications(wanted)
 
     def advance(self) -> None:
         """Advance the simulation one tick (stopping a command past its timeout first)."""
@@ -116,7 +114,12 @@ class VirtualRobot:
 
     def publications(self, wanted: Container[str] | None = None,
                      shed: bool = False) -> list[Publication]:
-        """The messages due at the tick just advanced to (arguments as ``step``'s)."""
+        """The messages due at the tick just advanced to.
+
+        Args:
+            wanted: the topics whose messages to build (None: all; a tap gets all).
+            shed: leave out the sheddable sensors (a late tick: /scan goes first).
+        """
         now_s = self.clock.stamp_s()
         out: list[Publication] = [(sensor.topic, sensor.build(self.sim, now_s))
                                   for sensor in self.due(wanted)
