@@ -181,12 +181,16 @@ class RobotHost:
         else:
             self.stats.scans_cast += 0 if shed else sheddable
         messages = [(spec.name, msg) for spec, msg in publications]
+        writers = self.schedule.writers  # the drivers' frames first, before the watchers'
         try:  # throttles count from when the tick was due: a late tick is no shorter gap
-            self.bridge.publish_many(messages, self._clock.monotonic_s() - lateness_s)
+            for flush in self.bridge.publish_many(messages,
+                                                  self._clock.monotonic_s() - lateness_s):
+                writers.write(flush)
         except Exception as error:  # the robot's boundary: record, go on
             self.faults.record(f"delivering {', '.join(name for name, _ in messages)}", error)
         try:
             self.bridge.services.expire()
+            writers.write(self.bridge.take_flush())
         except Exception as error:
             self.faults.record("expiring service calls", error)
 

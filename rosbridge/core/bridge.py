@@ -1,5 +1,10 @@
 """The rosbridge v2 protocol for one robot, without I/O: frames in, frames queued in outboxes.
 
+Pull-style, as a Sans-I/O protocol: every entry point (``handle``, ``publish``,
+``publish_many``, ``disconnect``) returns who must be written (a ``Flush``: the clients
+closing a loop first), and the transport writes it; the bridge never writes to a socket nor
+calls the transport.
+
 ``Bridge.handle`` takes one WebSocket message from one client, validates it against
 ``schema.OP_FIELDS`` (types and ranges), resolves the one name it carries
 (``schema.NAME_FIELDS``), asks the allow-list (``rosbridge.core.access``) once, and dispatches it
@@ -26,7 +31,7 @@ bridge goes on.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 from rosbridge.core import access
@@ -41,10 +46,10 @@ from rosbridge.core.faults import Faults
 from rosbridge.core.graph_port import Graph, GraphPort
 from rosbridge.core.outbox import Frame
 from rosbridge.core.schema import NAME_FIELDS, ProtocolError, read_operation, resolve_name
-from rosbridge.core.session import Session
+from rosbridge.core.session import Flush, Session, take_flush
 from rosbridge.msgs.checks import MessageError
 
-__all__ = ["Bridge", "BridgeError", "Graph", "ServiceError", "Session"]
+__all__ = ["Bridge", "BridgeError", "Flush", "Graph", "ServiceError", "Session"]
 
 Handler = Callable[[Session, dict[str, Any]], None]
 
@@ -93,17 +98,35 @@ class Bridge:
 
     # ---- what in-process endpoints use ------------------------------------------------------
 
-    def publish(self, topic: str, msg: Any, latch: bool = False) -> None:
-        """Send an in-process message (the robot's, the graph's) to ``topic``'s subscribers."""
+    def publish(self, topic: str, msg: Any, latch: bool = False) -> Flush:
+        """Queue an in-process message (the robot's, the graph's) for ``topic``'s subscribers.
+
+        Returns:
+            who must be written now (``Flush``).
+        """
         self.topics.publish(topic, msg, latch)
+        return self.take_flush()
 
     def publish_many(self, messages: list[tuple[str, Any]],
-                     tick_s: float | None = None) -> None:
-        """Send one tick's in-process messages; each client gets its share in one write.
+                     tick_s: float | None = None) -> Iterator[Flush]:
+        """Queue one tick's in-process messages; each client gets its share in one write.
 
-        ``tick_s``: when the tick was due (``clock.monotonic_s``), for throttles.
+        A generator, to be run to its end, writing each ``Flush`` it yields before asking for
+        the next: first the clients closing a loop (their frames queued, the watchers' not
+        yet), then everyone else. ``tick_s``: when the tick was due (``clock.monotonic_s``),
+        for throttles.
         """
-        self.topics.publish_many(messages, tick_s)
+        for _ in self.topics.publish_many(messages, tick_s):
+            yield self.take_flush()
+        yield self.take_flush()
+
+    def take_flush(self) -> Flush:
+        """Who must be written for what was queued since the last call returned its ``Flush``.
+
+        Every entry point returns it; this is for what the bridge did on another's behalf in
+        between (a ROS graph's answer, ``services.expire``).
+        """
+        return take_flush(self._context.ready, self._context.closing)
 
     def topic_types(self) -> dict[str, str]:
         """Every known topic and its type: the robot's, the clients' and the ROS graph's."""
@@ -112,30 +135,70 @@ class Bridge:
     # ---- connections ----------------------------------------------------------------------
 
     def connect(self, session: Session) -> None:
-        """Register a new client."""
+        """Register a new client: from now on its frames are noted in this bridge's flushes."""
         self.sessions.add(session)
+        session.ready = self._context.ready
 
-    def disconnect(self, session: Session) -> None:
-        """Forget a client: its subscriptions, advertisements, services, actions and calls."""
+    def disconnect(self, session: Session) -> Flush:
+        """Forget a client: its subscriptions, advertisements, services, actions and calls.
+
+        Returns:
+            who must be written: the other clients told of what it held (failed calls).
+        """
         self.sessions.discard(session)
         self.topics.disconnect(session)
         self.services.disconnect(session)
         self.actions.disconnect(session)
+        self._context.ready.pop(session, None)
+        self._context.closing.pop(session, None)
+        return self.take_flush()
 
     # ---- input ----------------------------------------------------------------------------
 
-    def handle(self, session: Session, frame: Frame, *, reassembled: bool = False) -> None:
+    def handle(self, session: Session, frame: Frame) -> Flush:
         """Act on one incoming WebSocket message from ``session``; never raises.
 
-        ``reassembled``: ``frame`` is the text of a fragmented message, put back together.
+        Returns:
+            who must be written (``Flush``): the clients closing a loop first.
         """
-        message: Any = None
+        self._handle(session, frame, reassembled=False)
+        return self.take_flush()
+
+    def handle_operation(self, session: Session, op: str, message: dict[str, Any]) -> Flush:
+        """Act on one operation already read (``schema.read_operation``); never raises.
+
+        For a hub that reads frames itself (the instructor's view of a class): ``message``
+        is taken as the operation's validated fields, and ``session.frame_bytes`` as the size
+        it arrived in.
+
+        Returns:
+            who must be written (``Flush``): the clients closing a loop first.
+        """
+        self._operate(session, op, message, reassembled=False)
+        return self.take_flush()
+
+    def _handle(self, session: Session, frame: Frame, *, reassembled: bool) -> None:
+        """Read one frame and act on it; ``reassembled``: the text of a fragmented message."""
         session.frame_bytes = len(frame)
         if session.fragments:
             for reason in session.fragments.expire():
                 session.report(reason)
         try:
             op, message = read_operation(frame, parse_json)
+        except ProtocolError as error:
+            session.refuse(str(error), error.message)
+            return
+        except Exception as error:  # a bug must not stop the bridge: record it, go on
+            self.faults.record(f"handling {_op_of(None)}", error)
+            session.refuse(f"internal error handling {_op_of(None)}: {type(error).__name__}",
+                           None)
+            return
+        self._operate(session, op, message, reassembled=reassembled)
+
+    def _operate(self, session: Session, op: str, message: dict[str, Any], *,
+                 reassembled: bool) -> None:
+        """Resolve, authorise and dispatch one operation; errors go back to ``session``."""
+        try:
             if reassembled and op == "fragment":
                 raise ProtocolError("a fragmented message cannot itself be a fragment")
             if "fragment_size" in message:  # any op sets it (rosbridge)
@@ -149,7 +212,7 @@ class Bridge:
                     raise BridgeError(str(denied)) from None
             self._handlers[op](session, message)
         except ProtocolError as error:
-            session.refuse(str(error), message if message is not None else error.message)
+            session.refuse(str(error), message)
         except self.refusals as error:
             session.refuse(str(error), message)
         except Exception as error:  # a bug must not stop the bridge: record it, go on
@@ -168,7 +231,7 @@ class Bridge:
         """One ``fragment``: the message it completes is handled as any frame is."""
         text = session.fragments.add(message)
         if text is not None:
-            self.handle(session, text, reassembled=True)
+            self._handle(session, text, reassembled=True)
 
 
 def _op_of(message: Any) -> str:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from rosbridge.core.clock import Clock
 from rosbridge.core.faults import Faults
 from rosbridge.core.graph_port import GraphPort
-from rosbridge.core.session import Session
+from rosbridge.core.session import Ready, Session
 
 
 @dataclass
@@ -27,6 +27,10 @@ class BridgeContext:
         refusals: what an in-process handler raises to refuse with a reason (not a fault).
         graph: the port to a ROS 2 graph (does nothing until one is attached).
         sessions: the connected clients.
+        ready: the clients whose outboxes got frames since the bridge last handed them to
+            the transport (each ``Session.ready`` is this set once connected).
+        closing: those of them closing a loop (``capabilities.topics.CLOSING_LOOP_S``), to
+            be written first.
     """
 
     clock: Clock
@@ -34,3 +38,5 @@ class BridgeContext:
     refusals: tuple[type[Exception], ...]
     graph: GraphPort
     sessions: set[Session] = field(default_factory=set)
+    ready: Ready = field(default_factory=dict)
+    closing: Ready = field(default_factory=dict)

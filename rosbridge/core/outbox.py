@@ -10,13 +10,16 @@ keep just its newest frame. Replies (service responses, statuses) are never drop
 Everything waiting is counted in bytes: past ``max_bytes``, or past ``max_replies`` replies,
 the outbox is marked ``overflowed`` with the reason, and the server closes the client (it is
 not reading).
+
+An outbox only holds frames: it calls nobody. Whoever queues into it reports the client as
+ready (``Session.ready``), and the core's entry points return who must be written
+(``Flush``); the transport writes it (``take``, ``pop``).
 """
 
 from __future__ import annotations
 
 import itertools
 from collections import deque
-from collections.abc import Callable
 
 Frame = str | bytes
 """A WebSocket message: text (JSON) or binary (CBOR)."""
@@ -45,20 +48,14 @@ class Outbox:
     Args:
         max_bytes: most bytes (characters of text frames) that may wait at once.
         max_replies: most replies that may wait at once.
-        wake: called whenever a frame is added (the connection schedules a write).
-        send: writes what waits at once (``send_now``), if the transport can.
     """
 
-    def __init__(self, max_bytes: int = 4 << 20, max_replies: int = 1000,
-                 wake: Callable[[], None] | None = None,
-                 send: Callable[[], None] | None = None) -> None:
+    def __init__(self, max_bytes: int = 4 << 20, max_replies: int = 1000) -> None:
         self._replies: deque[Frames] = deque()
         self._topics: dict[str, deque[tuple[int, Frames]]] = {}
         self._sequence = itertools.count()
         self._max_bytes = max_bytes
         self._max_replies = max_replies
-        self._wake = wake
-        self._send = send
         self.queued_bytes = 0
         """Bytes of every frame waiting."""
         self.dropped = 0
@@ -100,21 +97,6 @@ class Outbox:
             self.queued_bytes -= _size(queue[0][1])
         queue.append((next(self._sequence), frame))
         self._grow(_size(frame))
-
-    def detach(self) -> None:
-        """Forget the connection's callbacks once it is gone.
-
-        They are its bound methods: kept, they would tie the connection (and its buffers,
-        up to a megabyte per frame) to this outbox in a cycle that only a full garbage
-        collection frees.
-        """
-        self._wake = None
-        self._send = None
-
-    def send_now(self) -> None:
-        """Have what waits written now rather than after the current callback (a tick)."""
-        if self._send is not None:
-            self._send()
 
     def discard_topic(self, topic: str) -> None:
         """Forget frames of a topic the client unsubscribed from."""
@@ -171,11 +153,7 @@ class Outbox:
         self.queued_bytes += size
         if self.queued_bytes > self._max_bytes:
             self._overflow(f"more than {self._max_bytes} bytes waiting to be sent")
-        if self._wake is not None:
-            self._wake()
 
     def _overflow(self, reason: str) -> None:
         if self.overflowed is None:
             self.overflowed = f"send queue overflow: {reason} (the client is not reading)"
-        if self._wake is not None:
-            self._wake()

@@ -4,6 +4,10 @@ A ``Session`` holds everything of one client and nothing of any other: its right
 subscriptions and advertisements, the services it offers, its outbox and its budgets. The
 bridge's tables point at sessions; dropping a session (``Bridge.disconnect``) releases all of
 it.
+
+Frames reach a client only through its session (``reply``, ``queue_topic``), which notes the
+client as ready in its hub's ``Ready`` set; the hub's entry points hand what is ready back to
+the transport as a ``Flush``: the core never writes, nor calls the transport.
 """
 
 from __future__ import annotations
@@ -12,18 +16,21 @@ import logging
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeAlias
 
 from rosbridge.core.clock import Clock
 from rosbridge.core.encoding import to_json
 from rosbridge.core.errors import shorten
 from rosbridge.core.fragments import Reassembly, fragment
 from rosbridge.core.limits import ClientLimits, TokenBucket
-from rosbridge.core.outbox import Outbox
+from rosbridge.core.outbox import Frames, Outbox
 from rosbridge.core.schema import MAX_NAME_CHARS, STATUS_LEVELS, GoalStatus, echoable_id
 
 log = logging.getLogger("websim.bridge")
 
+
+NAMESPACED_FIELDS = ("service", "topic")
+"""The fields of a message sent to a client that a ``namespace`` prefixes."""
 
 COMPRESSION_PRECEDENCE = ("cbor-raw", "cbor", "png")
 """Which compression a topic is sent with when its subscribe ids ask for several (rosbridge's
@@ -84,6 +91,43 @@ class Subscription:
                                 "none")
 
 
+Ready: TypeAlias = "dict[Session, None]"
+"""An ordered set of clients whose outboxes got frames (or overflowed) since it was taken."""
+
+
+@dataclass(frozen=True)
+class Flush:
+    """Who must be written after a call into the core, in this order; the transport writes.
+
+    Attributes:
+        now: the clients closing a loop (``capabilities.topics.CLOSING_LOOP_S``): write them
+            at once.
+        later: every other client whose outbox got frames: write them once the current
+            callback (a tick, a frame) is done, one write each for all it queued.
+    """
+
+    now: tuple[Session, ...] = ()
+    later: tuple[Session, ...] = ()
+
+    def __bool__(self) -> bool:
+        return bool(self.now or self.later)
+
+    def __add__(self, other: Flush) -> Flush:
+        """Both, ``now`` before ``now`` and ``later`` before ``later`` (hubs' flushes joined)."""
+        return Flush(self.now + other.now, self.later + other.later)
+
+
+def take_flush(ready: Ready, closing: Ready | None = None) -> Flush:
+    """Empty ``ready`` (and ``closing``, the clients closing a loop among them) into a Flush."""
+    if closing:
+        flush = Flush(tuple(closing), tuple(s for s in ready if s not in closing))
+        closing.clear()
+    else:
+        flush = Flush((), tuple(ready))
+    ready.clear()
+    return flush
+
+
 class Session:
     """One connected client: its rights, subscriptions, advertisements, outbox and budgets.
 
@@ -93,6 +137,10 @@ class Session:
         outbox: where its outgoing frames wait (default: one bounded by ``limits``).
         limits: the bounds this client lives within.
         clock: the clock of its budgets and fragment timeouts (default: wall time).
+        namespace: a prefix (``/NAME``) for the topic and service names of everything it is
+            sent, for a client that sees several robots under their names (the instructor's
+            view of a class); empty: none. Names are prefixed in the messages, before they are
+            encoded.
 
     Attributes:
         advertised: topic -> {advertise id: type}; a topic stays advertised while any id does.
@@ -103,12 +151,15 @@ class Session:
             ops. Set by the ``fragment_size`` of any op it sends (rosbridge's
             ``Protocol.incoming``: one setting per client, the last one given; ``null``: off).
         fragments: its fragmented messages being put back together.
+        ready: where it notes that its outbox got frames: the ``Ready`` set of the hub it is
+            connected to (the hub's ``connect`` sets it; a set of its own before).
     """
 
     def __init__(self, peer: str, is_admin: bool, outbox: Outbox | None = None, *,
                  limits: ClientLimits | None = None,
-                 clock: Clock | None = None) -> None:
+                 clock: Clock | None = None, namespace: str = "") -> None:
         self.peer = peer
+        self.namespace = namespace
         self.is_admin = is_admin
         self.limits = limits or ClientLimits()
         self.outbox = outbox if outbox is not None else \
@@ -121,6 +172,7 @@ class Session:
         self.frame_bytes = 0
         """Size of the frame being handled (what a publish costs the relay budget)."""
         self.fragment_size: int | None = None
+        self.ready: Ready = {}
         clock_args = () if clock is None else (clock.monotonic_s,)
         self.fragments = Reassembly(self.limits, *clock_args)
         self.relay_budget = TokenBucket(  # a burst holds one message of the largest size
@@ -128,12 +180,32 @@ class Session:
             max(self.limits.relay_bytes_per_s, self.limits.max_frame_bytes), *clock_args)
 
     def reply(self, message: Mapping[str, Any]) -> None:
-        """Queue a reply (JSON text), in ``fragment`` ops if longer than ``fragment_size``."""
+        """Queue a reply (JSON text), in ``fragment`` ops if longer than ``fragment_size``.
+
+        Its ``service`` or ``topic`` name is prefixed with the ``namespace``, if any.
+        """
+        if self.namespace:
+            message = {key: self.namespace + value
+                       if key in NAMESPACED_FIELDS and isinstance(value, str) else value
+                       for key, value in message.items()}
         text = to_json(message)
         if self.fragment_size is not None and len(text) > self.fragment_size:
             self.outbox.put_reply(fragment(text, self.fragment_size, message.get("id")))
         else:
             self.outbox.put_reply(text)
+        self.ready[self] = None
+
+    def queue_topic(self, topic: str, frames: Frames, queue_length: int) -> None:
+        """Queue a message of ``topic`` (``Outbox.put_topic``: its newest ``queue_length``).
+
+        ``frames`` carry the name the client knows the topic by (``namespace`` + ``topic``).
+        """
+        self.outbox.put_topic(self.namespace + topic, frames, queue_length)
+        self.ready[self] = None
+
+    def discard_topic(self, topic: str) -> None:
+        """Forget the frames of ``topic`` waiting (it unsubscribed)."""
+        self.outbox.discard_topic(self.namespace + topic)
 
     def report(self, reason: str, message: Any = None) -> None:
         """Log an error and, if this client asked with set_level, send it as a status.

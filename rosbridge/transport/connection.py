@@ -1,4 +1,10 @@
-"""One client's WebSocket connection: its session, reader, writer and watchdog."""
+"""One client's WebSocket connection: its session, reader, writer and watchdog.
+
+The core is pull-style: what a call into a hub queues, the call returns as a ``Flush`` (who
+must be written, the clients closing a loop first), and the I/O layer writes it through the
+``Writers`` of its event loop (``Schedule.writers``): a connection after each of its frames,
+a robot's host after its tick, the schedule for what came in between (``sweep``).
+"""
 
 from __future__ import annotations
 
@@ -12,11 +18,13 @@ from websockets.asyncio.server import ServerConnection
 from websockets.exceptions import ConnectionClosed
 from websockets.protocol import State
 
+from rosbridge.core.clock import WALL_CLOCK, Clock
 from rosbridge.core.limits import ClientLimits, RateLimit, TokenBucket
 from rosbridge.core.outbox import Frame, Outbox
-from rosbridge.core.session import Session
+from rosbridge.core.session import Flush, Session
 from rosbridge.transport.schedule import Schedule
 from rosbridge.transport.wire import WireFrames
+from rosbridge.transport.writers import Writers
 
 log = logging.getLogger("websim.server")
 
@@ -61,11 +69,11 @@ class Hub(Protocol):
     def connect(self, session: Session) -> None:
         """Register the client."""
 
-    def disconnect(self, session: Session) -> None:
-        """Forget the client and all it holds."""
+    def disconnect(self, session: Session) -> Flush:
+        """Forget the client and all it holds; who must be written (the others told)."""
 
-    def handle(self, session: Session, frame: Frame) -> None:
-        """Act on one frame of the client; never raises."""
+    def handle(self, session: Session, frame: Frame) -> Flush:
+        """Act on one frame of the client; never raises. Who must be written."""
 
 
 class BridgeConnection:
@@ -81,24 +89,26 @@ class BridgeConnection:
         limits: the bounds it lives within.
         wire: where its frames are serialized (shared with the clients of the same server,
             so a message is framed once).
+        clock: the clock of its budgets and its watchdog (default: wall time).
     """
 
     def __init__(self, hub: Hub, schedule: Schedule, connection: ServerConnection, peer: str,
-                 is_admin: bool, limits: ClientLimits, wire: WireFrames | None = None) -> None:
+                 is_admin: bool, limits: ClientLimits, wire: WireFrames | None = None,
+                 clock: Clock = WALL_CLOCK) -> None:
         self._schedule = schedule
+        self._writers: Writers = schedule.writers
         self._bridge = hub
         self._connection = connection
         self._peer = peer
         self._limits = limits
         self._wire = wire if wire is not None else WireFrames()
-        self._loop = asyncio.get_running_loop()
-        self._flush_due = False
+        self._clock = clock
         self._backed_up = asyncio.Event()
-        outbox = Outbox(limits.max_queued_bytes, limits.max_replies, wake=self._wake,
-                        send=self._flush)
-        self.session = Session(peer, is_admin, outbox, limits=limits)
-        self._rate = RateLimit(limits.max_rate)
-        self._handling = TokenBucket(limits.handling_share, limits.handling_burst_s)
+        outbox = Outbox(limits.max_queued_bytes, limits.max_replies)
+        self.session = Session(peer, is_admin, outbox, limits=limits, clock=clock)
+        self._rate = RateLimit(limits.max_rate, clock.monotonic_s)
+        self._handling = TokenBucket(limits.handling_share, limits.handling_burst_s,
+                                     clock.monotonic_s)
         self._handed_bytes = 0
         self._closing: asyncio.Task[None] | None = None
 
@@ -107,6 +117,8 @@ class BridgeConnection:
         raw_socket = self._connection.transport.get_extra_info("socket")
         if raw_socket is not None:
             raw_socket.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
+        outbox = self.session.outbox
+        self._writers.add(outbox, self._flush)
         self._bridge.connect(self.session)
         log.info("client %s connected%s", self._peer,
                  " (admin)" if self.session.is_admin else "")
@@ -115,8 +127,8 @@ class BridgeConnection:
             await self._read()
         finally:
             writer.cancel()
-            self._bridge.disconnect(self.session)
-            self.session.outbox.detach()
+            self._writers.remove(outbox)
+            self._writers.write(self._bridge.disconnect(self.session))
             log.info("client %s disconnected", self._peer)
             if self._closing is not None:
                 await asyncio.wait([self._closing])
@@ -133,26 +145,16 @@ class BridgeConnection:
                 if len(frame) >= LARGE_FRAME_BYTES:  # handled between ticks, not across one
                     await self._schedule.room(len(frame) * HANDLING_S_PER_BYTE)
                 started = time.perf_counter()
-                self._bridge.handle(self.session, frame)
+                self._writers.write(self._bridge.handle(self.session, frame))
                 self._handling.charge(time.perf_counter() - started)
         except ConnectionClosed:
             pass
 
-    def _wake(self) -> None:
-        """The outbox got a frame: flush it once the current callback (a tick) is done."""
-        if not self._flush_due:
-            self._flush_due = True
-            self._loop.call_soon(self._scheduled_flush)
-
-    def _scheduled_flush(self) -> None:
-        self._flush_due = False
-        self._flush()
-
     def _flush(self) -> None:
         """Write what waits in the outbox onto the socket, in one write, without waiting.
 
-        Scheduled after the callback that queued a frame (``_wake``: a tick's frames go out
-        together), or called at once (``Outbox.send_now``: a client closing a loop).
+        Called by ``Writers``: at once for a client closing a loop (``Flush.now``), else
+        after the callback that queued its frames (a tick's frames go out together).
 
         Every frame goes out as its serialized bytes (``WireFrames``: framed once for all
         subscribers); nothing else of websockets runs per frame. Past ``WRITE_BUFFER_BYTES``
@@ -210,10 +212,10 @@ class BridgeConnection:
         ``send``; a socket that accepts (next to) nothing for ``stall_timeout_s`` while
         frames wait is a client that does not read.
         """
-        loop = asyncio.get_running_loop()
+        clock = self._clock
         transport = self._connection.transport
         baseline = 0
-        progress_s = loop.time()
+        progress_s = clock.monotonic_s()
         while True:
             await asyncio.sleep(WATCH_PERIOD_S)
             if self.session.outbox.overflowed is not None:  # the writer may be stuck in send
@@ -223,9 +225,9 @@ class BridgeConnection:
             accepted = self._handed_bytes - buffered  # what the kernel took so far
             waiting = buffered > 0 or len(self.session.outbox) > 0
             if not waiting or accepted - baseline >= PROGRESS_BYTES:
-                baseline, progress_s = accepted, loop.time()
+                baseline, progress_s = accepted, clock.monotonic_s()
                 continue
-            stalled_s = loop.time() - progress_s
+            stalled_s = clock.monotonic_s() - progress_s
             if stalled_s >= self._limits.stall_timeout_s:
                 self._close(POLICY_VIOLATION, f"not reading: the socket accepted nothing for "
                                               f"{stalled_s:.0f} s")

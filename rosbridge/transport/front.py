@@ -23,7 +23,6 @@ import hmac
 import http
 import json
 import logging
-import time
 from typing import Any, Protocol
 from urllib.parse import parse_qs, urlsplit
 
@@ -32,6 +31,7 @@ from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
 from rosbridge.core.bridge import Bridge
+from rosbridge.core.clock import WALL_CLOCK, Clock
 from rosbridge.core.limits import ClientLimits, OriginPolicy
 from rosbridge.transport.connection import BridgeConnection, Hub
 from rosbridge.transport.schedule import Schedule
@@ -69,14 +69,16 @@ class WebSocketFront(abc.ABC):
         admin_token: the secret that grants admin rights everywhere (``?token=``).
         limits: the bounds every client lives within.
         origins: which web pages may connect; None: any (tests and benchmarks).
+        clock: the clock of uptime, client budgets and watchdogs (default: wall time).
     """
 
     def __init__(self, admin_token: str, limits: ClientLimits | None = None,
-                 origins: OriginPolicy | None = None) -> None:
+                 origins: OriginPolicy | None = None, clock: Clock = WALL_CLOCK) -> None:
         self.limits = limits or ClientLimits()
         self._admin_token = admin_token
         self._origins = origins
-        self.started_monotonic_s = time.monotonic()
+        self.clock = clock
+        self.started_monotonic_s = clock.monotonic_s()
         self.wire = WireFrames()
         """Outgoing frames serialized once for all the clients they go to."""
 
@@ -162,7 +164,7 @@ class WebSocketFront(abc.ABC):
             log.info("instructor %s connected to the class's root view", peer)
             hub, schedule = view
             await BridgeConnection(hub, schedule, connection, peer, True,
-                                   self.limits, self.wire).run()
+                                   self.limits, self.wire, self.clock).run()
             return
         routed = self.route(target.path)
         if isinstance(routed, str):  # pragma: no cover - refused at the handshake
@@ -172,10 +174,10 @@ class WebSocketFront(abc.ABC):
         if token and not is_admin:
             log.warning("client %s presented a wrong admin token", peer)
         await BridgeConnection(host.bridge, host.schedule, connection, peer, is_admin,
-                               self.limits, self.wire).run()
+                               self.limits, self.wire, self.clock).run()
 
     def _uptime_s(self) -> float:
-        return round(time.monotonic() - self.started_monotonic_s, 3)
+        return round(self.clock.monotonic_s() - self.started_monotonic_s, 3)
 
 
 def json_response(body: Any, status: http.HTTPStatus = http.HTTPStatus.OK) -> Response:

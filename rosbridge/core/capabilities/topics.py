@@ -12,7 +12,7 @@ type it cannot import.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Iterator
 from typing import Any
 
 from rosbridge.core.clock import WALL_CLOCK, Clock
@@ -36,10 +36,10 @@ late ticks run; this covers rounding, and clients' messages timed on arrival."""
 
 CLOSING_LOOP_S = 1.0
 """A client that published within this long closes a loop (a teleop page, a PID node): in
-every fan-out its frame is queued first and written at once (``Outbox.send_now``), before
-the message is queued for the clients that only watch. With 500 watchers, queueing and
-writing for all of them takes milliseconds; the driver's /odom does not wait for that
-(benchmarks/bench_server.py)."""
+every fan-out its frame is queued first and handed to the transport to be written at once
+(``Flush.now``); in a tick (``publish_many``) that happens before the message is even queued
+for the clients that only watch. With 500 watchers, queueing and writing for all of them
+takes milliseconds; the driver's /odom does not wait for that (benchmarks/bench_server.py)."""
 
 LocalSubscriber = Callable[[Any, Session], None]
 """An in-process subscriber: called with a client's (canonical) message and its publisher.
@@ -50,8 +50,9 @@ publisher."""
 class Encoded:
     """One publish envelope, encoded at most once per format whatever the subscriber count.
 
-    A format is a compression (``schema.COMPRESSIONS``) and, for the JSON ones (``none``,
-    ``png``), a ``fragment_size``: a longer text goes as its ``fragment`` frames.
+    A format is a compression (``schema.COMPRESSIONS``), for the JSON ones (``none``,
+    ``png``) a ``fragment_size`` (a longer text goes as its ``fragment`` frames), and a
+    namespace that prefixes the topic's name in the envelope (``Session.namespace``).
 
     Args:
         topic: the topic it is published on.
@@ -64,27 +65,32 @@ class Encoded:
         self._clock = clock
         self.envelope = {"op": "publish", "topic": topic, "msg": msg}
         self._json: str | None = None
-        self._frames: dict[tuple[str, int | None], Frames] = {}
+        self._frames: dict[tuple[str, int | None, str], Frames] = {}
 
     def frame(self, compression: str, fragment_size: int | None = None,
-              type_name: str | None = None) -> Frames:
+              type_name: str | None = None, namespace: str = "") -> Frames:
         """The frames for subscribers that asked for ``compression`` and ``fragment_size``.
 
         ``type_name``: the topic's type, for ``cbor-raw``; a message that cannot be
-        serialized gets an error ``status`` frame in its place.
+        serialized gets an error ``status`` frame in its place. ``namespace``: the prefix
+        of the topic's name for the subscriber (``Session.namespace``).
 
         Raises:
             ValueError: the message cannot be written in this format at all.
         """
         binary = compression in ("cbor", "cbor-raw")
-        key = (compression, None if binary else fragment_size)
+        key = (compression, None if binary else fragment_size, namespace)
         frames = self._frames.get(key)
         if frames is None:
-            frames = self._frames[key] = self._encode(compression, fragment_size, type_name)
+            frames = self._frames[key] = self._encode(compression, fragment_size, type_name,
+                                                      namespace)
         return frames
 
     def _encode(self, compression: str, fragment_size: int | None,
-                type_name: str | None) -> Frames:
+                type_name: str | None, namespace: str) -> Frames:
+        if namespace:  # the same message under the name the subscriber knows the topic by
+            named = Encoded(namespace + self.topic, self.envelope["msg"], self._clock)
+            return named._encode(compression, fragment_size, type_name, "")
         if compression == "cbor":
             return to_cbor(self.envelope)
         if compression == "cbor-raw":
@@ -153,22 +159,24 @@ class Topics:
         self._local.setdefault(topic, []).append(callback)
 
     def publish(self, topic: str, msg: Any, latch: bool = False) -> None:
-        """Send an in-process message (the robot's, the ROS graph's) to ``topic``'s clients."""
+        """Queue an in-process message (the robot's, the ROS graph's) for ``topic``'s clients."""
         encoded = Encoded(topic, msg, self._context.clock)
         if latch:
             self._latched[topic] = encoded
-        self._deliver([encoded])
+        _run(self._deliver([encoded]))
 
     def publish_many(self, messages: list[tuple[str, Any]],
-                     tick_s: float | None = None) -> None:
-        """Send several in-process messages (one tick's) to their clients, not latched.
+                     tick_s: float | None = None) -> Iterator[None]:
+        """Queue several in-process messages (one tick's) for their clients, not latched.
 
-        A client gets all of its messages of the tick in one write. ``tick_s``: when the
-        tick was due (monotonic s), the time throttles measure against, so a tick that runs
-        late does not make a throttled client miss its message.
+        A generator, to be run to its end: it pauses once the clients closing a loop have
+        all their messages of the tick queued (``BridgeContext.closing``), so that they can
+        be written before the others' are queued. ``tick_s``: when the tick was due
+        (monotonic s), the time throttles measure against, so a tick that runs late does not
+        make a throttled client miss its message.
         """
-        self._deliver([Encoded(topic, msg, self._context.clock) for topic, msg in messages],
-                      tick_s)
+        return self._deliver([Encoded(topic, msg, self._context.clock)
+                              for topic, msg in messages], tick_s)
 
     def has_subscribers(self, topic: str) -> bool:
         """Whether any client subscribes to ``topic``."""
@@ -287,7 +295,7 @@ class Topics:
         encoded = Encoded(topic, msg, self._context.clock)
         if latch:
             self._latched[topic] = encoded
-        self._deliver([encoded])
+        _run(self._deliver([encoded]))
         self._context.graph.publish(session, topic, type_name, msg)
 
     def _inferred_type(self, topic: str) -> str | None:
@@ -305,12 +313,13 @@ class Topics:
         """The type ``topic`` is known to carry here (not asking the graph)."""
         return self._types.get(topic) or self._subscribed_types.get(topic)
 
-    def _deliver(self, messages: list[Encoded], now_s: float | None = None) -> None:
+    def _deliver(self, messages: list[Encoded], now_s: float | None = None) -> Iterator[None]:
         """Queue ``messages`` (one tick's, or one client's publish) for their subscribers.
 
-        Clients closing a loop get all of them first, in one write (``send_now``); then the
-        clients that only watch, whose writes wait for the end of the tick. ``now_s``: the
-        time throttles measure against (default: the clock).
+        A generator: clients closing a loop get all of them queued first (and are noted in
+        ``BridgeContext.closing``: written first, in one write); it pauses there if there are
+        any, then queues them for the clients that only watch. ``now_s``: the time throttles
+        measure against (default: the clock).
         """
         now = self._context.clock.monotonic_s() if now_s is None else now_s
         audiences = [(encoded, subscribers) for encoded in messages
@@ -327,7 +336,9 @@ class Topics:
                     if not self._queue(session, encoded, now):
                         unencodable.add(encoded.topic)
             if subscribed:
-                session.outbox.send_now()
+                self._context.closing[session] = None
+        if self._context.closing:
+            yield
         for encoded, subscribers in audiences:
             if encoded.topic in unencodable:
                 continue
@@ -349,12 +360,12 @@ class Topics:
         subscription.last_sent_s = now
         try:
             frame = encoded.frame(subscription.compression, session.fragment_size,
-                                  self._type_of(topic))
+                                  self._type_of(topic), session.namespace)
         except (TypeError, ValueError) as error:  # a message no encoder can write
             self._context.faults.record(f"encoding {topic}", error)
             return False
         try:
-            session.outbox.put_topic(topic, frame, subscription.queue_in_force)
+            session.queue_topic(topic, frame, subscription.queue_in_force)
         except Exception as error:  # one client's fault is not the others'
             self._context.faults.record(f"delivering {topic}", error)
         return True
@@ -405,8 +416,8 @@ class Topics:
         if latched is not None:
             _, length = subscription.effective()
             frames = latched.frame(subscription.compression, session.fragment_size,
-                                   self._type_of(topic))
-            session.outbox.put_topic(topic, frames, length)
+                                   self._type_of(topic), session.namespace)
+            session.queue_topic(topic, frames, length)
 
     def _check_cdr(self, topic: str) -> None:
         """Refuse ``cbor-raw`` on a topic whose known type cannot be serialized as CDR."""
@@ -428,7 +439,7 @@ class Topics:
 
     def _drop_subscription(self, session: Session, topic: str) -> None:
         session.subscriptions.pop(topic, None)
-        session.outbox.discard_topic(topic)
+        session.discard_topic(topic)
         subscribers = self._subscribers.get(topic)
         if subscribers is not None:
             subscribers.discard(session)
@@ -436,3 +447,9 @@ class Topics:
                 del self._subscribers[topic]
                 self._subscribed_types.pop(topic, None)
                 self._context.graph.unsubscribe(topic)
+
+
+def _run(steps: Iterator[None]) -> None:
+    """Run a delivery to its end (its pause only matters to a tick's)."""
+    for _ in steps:
+        pass

@@ -1,0 +1,73 @@
+"""Where the core's flushes are written: the connections of one event loop, by outbox.
+
+The core returns who must be written (``Flush``); ``Writers`` finds each client's connection
+by its outbox (the instructor's view of a class holds one session per robot, all on its one
+connection's outbox) and has it write what waits there: at once for the clients closing a
+loop, after the current callback for the others (so that everything one callback queued for
+a client goes out in one write).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+
+from rosbridge.core.outbox import Outbox
+from rosbridge.core.session import Flush
+
+
+class Writers:
+    """The connections of one event loop, each by the outbox it writes from."""
+
+    def __init__(self) -> None:
+        self._writers: dict[Outbox, Callable[[], None]] = {}
+        self._later: dict[Outbox, None] = {}
+        self._scheduled = False
+
+    def __len__(self) -> int:
+        return len(self._writers)
+
+    def add(self, outbox: Outbox, write: Callable[[], None]) -> None:
+        """Have ``write`` called whenever frames in ``outbox`` are to be written."""
+        self._writers[outbox] = write
+
+    def remove(self, outbox: Outbox) -> None:
+        """Forget ``outbox``'s writer (its connection is gone)."""
+        self._writers.pop(outbox, None)
+        self._later.pop(outbox, None)
+
+    def write(self, flush: Flush) -> None:
+        """Write ``flush``: ``now`` at once, in order; ``later`` after the current callback.
+
+        Clients of no connection here (a test's sessions) are skipped.
+        """
+        writers = self._writers
+        for session in flush.now:
+            write = writers.get(session.outbox)
+            if write is not None:
+                write()
+        for session in flush.later:
+            if session.outbox in writers:
+                self._later[session.outbox] = None
+        if self._later and not self._scheduled:
+            self._scheduled = True
+            asyncio.get_running_loop().call_soon(self._write_later)
+
+    def sweep(self) -> None:
+        """Write every connection that has frames waiting, whoever queued them.
+
+        For what reached the core other than through an entry point whose ``Flush`` was
+        written (a ROS graph's answers and messages, arriving on the loop between ticks).
+        """
+        for outbox, write in list(self._writers.items()):
+            if outbox.queued_bytes > 0 or outbox.overflowed is not None:
+                write()
+
+    def _write_later(self) -> None:
+        self._scheduled = False
+        later = list(self._later)
+        self._later.clear()
+        for outbox in later:
+            write = self._writers.get(outbox)
+            if write is not None:
+                write()
