@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import threading
+from collections.abc import Callable
 
 import rclpy
 from rclpy.context import Context
@@ -34,6 +35,7 @@ from rosbridge.graph.names import RELAY_NODE_NAME
 from rosbridge.graph.relay import GraphRelay, LoopAccess
 from rosbridge.graph.services import GraphServices
 from rosbridge.msgs.values import Message
+from rosbridge.transport.writers import Writers
 
 
 def spin_until_shutdown(executor: SingleThreadedExecutor, context: Context) -> None:
@@ -57,10 +59,13 @@ class RosRuntime:
         robot: the robot the server ticks.
         bridge: the server's bridge, which gets the relay attached.
         loop: the server's event loop.
+        writers: where the bridge's flushes are written (the server's ``Schedule.writers``):
+            a graph topic's messages and an action's answers go out at once. None: with the
+            next tick (``Writers.sweep``).
     """
 
     def __init__(self, robot: VirtualRobot, bridge: Bridge,
-                 loop: asyncio.AbstractEventLoop) -> None:
+                 loop: asyncio.AbstractEventLoop, writers: Writers | None = None) -> None:
         self._bridge = bridge
         self.context = Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
@@ -73,17 +78,28 @@ class RosRuntime:
             self.context.try_shutdown()
             raise
 
+        def publish(topic: str, msg: Message, latched: bool) -> None:
+            flush = bridge.publish(topic, msg, latched)
+            if writers is not None:
+                writers.write(flush)
+
         def deliver(topic: str, msg: Message, latched: bool) -> None:
             with contextlib.suppress(RuntimeError):  # the loop closed while shutting down
-                loop.call_soon_threadsafe(bridge.publish, topic, msg, latched)
+                loop.call_soon_threadsafe(publish, topic, msg, latched)
+
+        def post(fn: Callable[[], None]) -> None:  # an action's answer, written at once
+            def run() -> None:
+                fn()
+                if writers is not None:
+                    writers.write(bridge.take_flush())
+            LoopAccess(loop).post(run)
 
         self.relay = GraphRelay(self.relay_node, deliver)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.relay.services = GraphServices(self.relay_node, self.executor, loop)
         self.executor.add_node(self.robot_node)
         self.executor.add_node(self.relay_node)
-        self.actions = RosActions(self.relay_node, LoopAccess(loop).post, loop.call_later,
-                                  self.executor)
+        self.actions = RosActions(self.relay_node, post, loop.call_later, self.executor)
         self._thread = threading.Thread(target=self._spin, name="rclpy-executor", daemon=True)
 
     def start(self) -> None:

@@ -276,7 +276,8 @@ def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
                            "or source a ROS 2 installation)") from None
     runtime: RosRuntime | ClassRosRuntime
     if site.robot is not None and isinstance(site.front, SimServer):
-        runtime = RosRuntime(site.robot, site.front.bridge, loop)
+        runtime = RosRuntime(site.robot, site.front.bridge, loop,
+                             site.front.host.schedule.writers)
     else:
         hosts = site.class_hosts()
         unnamable = [name for name, _ in hosts if not NAME_TOKEN.fullmatch(name)]
