@@ -16,9 +16,9 @@ import math
 from typing import Any
 
 import cbor2
+from bridge_rig import Rig
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_bridge import Rig
 
 from rosbridge.core.schema import OP_FIELDS
 
