@@ -29,7 +29,7 @@ class ClassServer(WebSocketFront):
     """Many robots behind one WebSocket port, routed by path.
 
     Args:
-        classroom: the robots.
+        classroom: the robots (its clock is the front's: uptime, client budgets).
         admin_token: the instructor's secret, admin on every robot.
         limits: the bounds every client lives within.
         origins: which web pages may connect; None: any (tests and benchmarks).
@@ -38,7 +38,7 @@ class ClassServer(WebSocketFront):
     def __init__(self, classroom: Classroom, admin_token: str,
                  limits: ClientLimits | None = None,
                  origins: OriginPolicy | None = None) -> None:
-        super().__init__(admin_token, limits, origins)
+        super().__init__(admin_token, limits, origins, classroom.clock)
         self.classroom = classroom
 
     def route(self, path: str) -> tuple[Destination, str | None] | str:

@@ -153,7 +153,8 @@ class Classroom:
                  make_token: Callable[[str], str] | None = None, lazy: bool = False,
                  clock: Clock | None = None) -> None:
         self.schedule = schedule or Schedule(TICK_PERIOD_S)
-        self._clock: Clock = WallClock() if clock is None else clock
+        self.clock: Clock = WallClock() if clock is None else clock
+        """The class's one clock (its robots' too)."""
         self.open_class = open_class
         self.max_robots = max(max_robots, len(roster))
         self._make_robot = make_robot
@@ -225,7 +226,7 @@ class Classroom:
         if not hosts:
             return
         loop = asyncio.get_running_loop()
-        now_s = self._clock.monotonic_s()
+        now_s = self.clock.monotonic_s()
         slots = min(SLOTS, len(hosts))
         slot_s = SPREAD * self.schedule.period_s / slots
         groups = [hosts[index::slots] for index in range(slots)]
@@ -248,7 +249,7 @@ class Classroom:
             due_s: when the group was due (the class clock's monotonic s).
             lateness_s: how late the period's tick started (s).
         """
-        late_s = lateness_s + max(0.0, self._clock.monotonic_s() - due_s)
+        late_s = lateness_s + max(0.0, self.clock.monotonic_s() - due_s)
         advanced = [host for host in hosts if host.begin_tick(late_s)]
         preparing: dict[Sensor, list[RobotHost]] = {}
         for host in advanced:

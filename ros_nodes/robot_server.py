@@ -16,7 +16,7 @@ class SimServer(WebSocketFront):
     """The WebSocket front of one robot, at every path but ``/robots/...``.
 
     Args:
-        robot: the virtual robot to run.
+        robot: the virtual robot to run (its clock is the front's: uptime, client budgets).
         admin_token: the secret that grants admin rights (``?token=`` in the URL).
         limits: the bounds every client lives within.
         origins: which web pages may connect; None: any (tests and benchmarks).
@@ -25,7 +25,7 @@ class SimServer(WebSocketFront):
     def __init__(self, robot: VirtualRobot, admin_token: str,
                  limits: ClientLimits | None = None,
                  origins: OriginPolicy | None = None) -> None:
-        super().__init__(admin_token, limits, origins)
+        super().__init__(admin_token, limits, origins, robot.clock)
         self.host = RobotHost(robot)
 
     @property
