@@ -70,6 +70,16 @@ class RobotRig:
             frames.append(cbor2.loads(frame) if isinstance(frame, bytes) else json.loads(frame))
         return frames
 
+    def call(self, session: Session, service: str, args: Any = None,
+             call_id: str = "c1") -> Any:
+        """``session`` calls ``service``: its one ``service_response`` (other frames dropped)."""
+        self.send(session, {"op": "call_service", "service": service, "id": call_id,
+                            "args": {} if args is None else args})
+        replies = [frame for frame in self.drain(session) if frame.get("op") == "service_response"]
+        assert len(replies) == 1, replies
+        assert replies[0]["id"] == call_id
+        return replies[0]
+
 
 def robot_rig(world: str = "empty", *, seed: int = 0, mode: str = "kinematic",
               lidar: LidarParams | None = None, noise: NoiseParams | None = None,

@@ -2,23 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Any
-
-from robot_rig import RobotRig, robot_rig
+from robot_rig import robot_rig
 
 from physics import Simulation, load_world
 from ros_nodes.robot_host import RobotHost
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.clock import ManualClock
-from rosbridge.core.session import Session
 
 TWIST = {"linear": {"x": 0.2, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
-
-
-def call(rig: RobotRig, session: Session, service: str) -> Any:
-    rig.send(session, {"op": "call_service", "service": service, "id": "c", "args": {}})
-    [reply] = [frame for frame in rig.drain(session) if frame["op"] == "service_response"]
-    return reply["values"]
 
 
 def test_the_clock_stamps_the_messages_and_ages_the_last_command() -> None:
@@ -30,8 +21,8 @@ def test_the_clock_stamps_the_messages_and_ages_the_last_command() -> None:
     [odom] = [frame for frame in rig.drain(admin) if frame.get("topic") == "/odom"]
     assert odom["msg"]["header"]["stamp"] == {"sec": 1_700_000_010, "nanosec": 0}
     rig.clock.advance(2.0)
-    assert call(rig, admin, "/websim/status")["last_drive_age_s"] == 2.05
-    now = call(rig, admin, "/rosapi/get_time")["time"]
+    assert rig.call(admin, "/websim/status")["values"]["last_drive_age_s"] == 2.05
+    now = rig.call(admin, "/rosapi/get_time")["values"]["time"]
     assert now["sec"] == 1_700_000_012 and abs(now["nanosec"] - 50_000_000) < 1_000
 
 
