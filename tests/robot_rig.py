@@ -83,7 +83,8 @@ class RobotRig:
 
 def robot_rig(world: str = "empty", *, seed: int = 0, mode: str = "kinematic",
               lidar: LidarParams | None = None, noise: NoiseParams | None = None,
-              clock: ManualClock | None = None) -> RobotRig:
+              clock: ManualClock | None = None,
+              idle_pause_s: float | None = None) -> RobotRig:
     """A robot in ``world`` (a shipped name or a file), hosted, on a manual clock.
 
     Args:
@@ -93,7 +94,9 @@ def robot_rig(world: str = "empty", *, seed: int = 0, mode: str = "kinematic",
         lidar: the LiDAR (default: the shipped one).
         noise: the noise sigmas (default: none).
         clock: the clock (default: a ``ManualClock`` at 0 s).
+        idle_pause_s: the host pauses the robot after this long without clients (s); None:
+            never.
     """
     clock = ManualClock() if clock is None else clock
     sim = Simulation(load_world(world), seed=seed, mode=mode, lidar=lidar, noise=noise)
-    return RobotRig(RobotHost(VirtualRobot(sim, clock)), clock)
+    return RobotRig(RobotHost(VirtualRobot(sim, clock), idle_pause_s=idle_pause_s), clock)

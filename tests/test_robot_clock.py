@@ -4,9 +4,6 @@ from __future__ import annotations
 
 from robot_rig import robot_rig
 
-from physics import Simulation, load_world
-from ros_nodes.robot_host import RobotHost
-from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.clock import ManualClock
 
 TWIST = {"linear": {"x": 0.2, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
@@ -27,9 +24,8 @@ def test_the_clock_stamps_the_messages_and_ages_the_last_command() -> None:
 
 
 def test_the_clock_times_the_idle_pause() -> None:
-    clock = ManualClock()
-    host = RobotHost(VirtualRobot(Simulation(load_world("empty"), seed=0), clock),
-                     idle_pause_s=1.0)
+    rig = robot_rig(idle_pause_s=1.0)
+    host, clock = rig.host, rig.clock
     host.tick()
     clock.advance(0.99)
     host.tick()
