@@ -15,6 +15,8 @@ import pytest
 from bridge_rig import Rig, topics_of
 
 from physics import LidarParams
+from rosbridge.core.bridge import Session
+from rosbridge.core.outbox import Outbox
 
 
 @pytest.fixture
@@ -201,3 +203,17 @@ def test_disconnect_forgets_everything_of_the_client(rig: Rig) -> None:
     assert client not in rig.bridge.sessions
     assert list(rig.bridge.topics.subscribed_topics()) == []
     assert "/mine" not in rig.bridge.topic_types()
+
+
+def test_a_namespaced_client_gets_its_names_prefixed_in_messages_encoded_once(rig: Rig) -> None:
+    """The instructor's view of a class: robot alice's /odom is /alice/odom."""
+    views = [Session(f"instructor-{i}", True, Outbox(), namespace="/alice") for i in range(2)]
+    for view in views:
+        rig.bridge.connect(view)
+        rig.send(view, {"op": "subscribe", "topic": "/odom"})
+    rig.tick()
+    frames = [view.outbox.pop() for view in views]
+    assert frames[0] is frames[1], "encoded once for both"
+    assert json.loads(str(frames[0]))["topic"] == "/alice/odom"
+    reply = rig.call(views[0], "/nope")
+    assert reply["service"] == "/alice/nope" and reply["result"] is False

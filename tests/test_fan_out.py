@@ -30,6 +30,7 @@ from rosbridge.core.clock import ManualClock
 from rosbridge.core.outbox import Outbox
 from rosbridge.transport.front import start_websocket
 from rosbridge.transport.wire import WireFrames, serialize
+from rosbridge.transport.writers import Writers
 
 TWIST = {"linear": {"x": 0.1, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
 
@@ -130,6 +131,37 @@ def test_a_watcher_is_not_served_first() -> None:
     for flush in bridge.publish_many([(spec.name, msg) for spec, msg in robot.step()]):
         sent.extend(session.peer for session in flush.now)  # written at once
     assert sent == []  # nobody drives: every frame waits for the tick's one write
+
+
+def test_the_transport_writes_a_driver_at_once_and_each_watcher_once_after_the_tick() -> None:
+    async def scenario() -> list[str]:
+        robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
+        bridge, writers = Bridge(), Writers()
+        RobotEndpoint(bridge, robot)
+        written: list[str] = []
+        sessions = [Session(name, False, Outbox()) for name in ("w0", "driver", "w1")]
+        for session in sessions:
+            bridge.connect(session)
+            writers.add(session.outbox, lambda session=session: (
+                written.append(session.peer), session.outbox.take(1 << 20)))
+            writers.write(bridge.handle(session, json.dumps({"op": "subscribe",
+                                                             "topic": "/odom"})))
+        writers.write(bridge.handle(sessions[1], json.dumps(
+            {"op": "publish", "topic": "/cmd_vel", "msg": TWIST})))
+        await asyncio.sleep(0)
+        written.clear()
+        for _ in range(2):  # two ticks in one callback: still one write per watcher
+            for flush in bridge.publish_many([(spec.name, msg) for spec, msg in robot.step()]):
+                writers.write(flush)
+        assert written == ["driver", "driver"]  # at once, each tick
+        await asyncio.sleep(0)  # the callback is done
+        assert sorted(written[2:]) == ["w0", "w1"]
+        for spec, msg in robot.step():  # Flushes not written: the next tick's sweep does it
+            bridge.publish(spec.name, msg)
+        writers.sweep()
+        return written[4:]
+
+    assert sorted(asyncio.run(scenario())) == ["driver", "w0", "w1"]
 
 
 @contextlib.asynccontextmanager

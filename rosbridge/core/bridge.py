@@ -1,9 +1,9 @@
 """The rosbridge v2 protocol for one robot, without I/O: frames in, frames queued in outboxes.
 
-Pull-style, as a Sans-I/O protocol: every entry point (``handle``, ``publish``,
-``publish_many``, ``disconnect``) returns who must be written (a ``Flush``: the clients
-closing a loop first), and the transport writes it; the bridge never writes to a socket nor
-calls the transport.
+Pull-style, as a Sans-I/O protocol: every entry point (``handle``, ``handle_operation``,
+``publish``, ``publish_many``, ``disconnect``) returns who must be written (a ``Flush``: the
+clients closing a loop first), and the transport writes it; the bridge never writes to a
+socket nor calls the transport.
 
 ``Bridge.handle`` takes one WebSocket message from one client, validates it against
 ``schema.OP_FIELDS`` (types and ranges), resolves the one name it carries
@@ -18,7 +18,7 @@ They share one ``BridgeContext`` (the clients, the clock, faults, refusals and t
 ``GraphPort`` to a ROS 2 graph, ``websim serve --ros``), and reach each other only through
 what the bridge hands them.
 
-The robot is attached like a client of the hub (``robot_endpoint.attach``): it subscribes
+An in-process endpoint (a robot's) is attached like a client of the hub: it subscribes
 /cmd_vel and publishes its topics through ``topics``. A bridge holds no module-level state:
 many can run in one process, one per robot.
 
