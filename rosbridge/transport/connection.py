@@ -67,7 +67,7 @@ class Hub(Protocol):
     """What a connection's frames go to: a robot's ``Bridge``, or an instructor's view."""
 
     def connect(self, session: Session) -> None:
-        """Register the client."""
+        """Register the client (its frames are noted in the hub's flushes from now on)."""
 
     def disconnect(self, session: Session) -> Flush:
         """Forget the client and all it holds; who must be written (the others told)."""
@@ -82,7 +82,8 @@ class BridgeConnection:
     Args:
         hub: what its frames go to: the bridge of the robot it talks to (or the instructor's
             view of a class).
-        schedule: the tick schedule large frames make room in.
+        schedule: the tick schedule large frames make room in; its ``writers`` write what
+            the hub returns (the connection registers there, by its outbox).
         connection: its WebSocket.
         peer: its address, for logs.
         is_admin: whether it presented the admin token.
