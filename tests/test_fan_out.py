@@ -15,17 +15,16 @@ import weakref
 from collections.abc import AsyncIterator
 
 import pytest
+from robot_rig import robot_rig
 from websockets.asyncio.client import connect
 from websockets.frames import Frame as WebSocketFrame
 from websockets.frames import Opcode
 from websockets.streams import StreamReader
 
 from physics import Simulation, load_world
-from ros_nodes.robot_endpoint import RobotEndpoint
-from ros_nodes.robot_host import RobotHost
 from ros_nodes.robot_server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
-from rosbridge.core.bridge import Bridge, Session
+from rosbridge.core.bridge import Session
 from rosbridge.core.clock import ManualClock
 from rosbridge.core.outbox import Outbox
 from rosbridge.transport.front import start_websocket
@@ -96,9 +95,8 @@ def test_take_gives_the_pop_order_and_respects_its_budget() -> None:
 
 
 def test_a_client_that_drives_gets_its_odom_before_it_is_queued_for_watchers() -> None:
-    robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
-    bridge = Bridge()
-    RobotEndpoint(bridge, robot)
+    rig = robot_rig()
+    robot, bridge = rig.robot, rig.bridge
     seen_by_driver: list[int] = []
     watchers = [Session(f"watcher-{i}", False, Outbox()) for i in range(20)]
 
@@ -120,9 +118,8 @@ def test_a_client_that_drives_gets_its_odom_before_it_is_queued_for_watchers() -
 
 
 def test_a_watcher_is_not_served_first() -> None:
-    robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
-    bridge = Bridge()
-    RobotEndpoint(bridge, robot)
+    rig = robot_rig()
+    robot, bridge = rig.robot, rig.bridge
     sent: list[str] = []
     sessions = [Session(f"c{i}", False, Outbox()) for i in range(3)]
     for session in sessions:
@@ -135,9 +132,8 @@ def test_a_watcher_is_not_served_first() -> None:
 
 def test_the_transport_writes_a_driver_at_once_and_each_watcher_once_after_the_tick() -> None:
     async def scenario() -> list[str]:
-        robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
-        bridge, writers = Bridge(), Writers()
-        RobotEndpoint(bridge, robot)
+        rig = robot_rig()
+        robot, bridge, writers = rig.robot, rig.bridge, Writers()
         written: list[str] = []
         sessions = [Session(name, False, Outbox()) for name in ("w0", "driver", "w1")]
         for session in sessions:
@@ -211,9 +207,8 @@ def test_many_watchers_and_one_driver_over_real_sockets() -> None:
 
 
 def test_a_driver_gets_all_of_its_tick_in_one_write() -> None:
-    robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
-    bridge = Bridge()
-    RobotEndpoint(bridge, robot)
+    rig = robot_rig()
+    robot, bridge = rig.robot, rig.bridge
     writes: list[int] = []
     driver = Session("driver", False, Outbox())
     bridge.connect(driver)
@@ -245,8 +240,8 @@ def test_only_the_messages_someone_subscribes_to_are_built() -> None:
 
 
 def test_a_throttle_counts_from_when_ticks_were_due_so_late_ticks_lose_nothing() -> None:
-    clock = ManualClock(100.0)
-    host = RobotHost(VirtualRobot(Simulation(load_world("empty"), seed=0), clock))
+    rig = robot_rig(clock=ManualClock(100.0))
+    host, clock = rig.host, rig.clock
     watcher = Session("dashboard", True, Outbox())
     host.bridge.connect(watcher)
     host.bridge.handle(watcher, json.dumps({"op": "subscribe", "topic": "/odom",
