@@ -19,7 +19,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import threading
-from collections.abc import Callable
 
 import rclpy
 from rclpy.context import Context
@@ -60,17 +59,24 @@ class RosRuntime:
         bridge: the server's bridge, which gets the relay attached.
         loop: the server's event loop.
         writers: where the bridge's flushes are written (the server's ``Schedule.writers``):
-            a graph topic's messages and an action's answers go out at once. None: with the
-            next tick (``Writers.sweep``).
+            a graph topic's messages, an action's or a graph service's answers and the robot
+            node's parameter events go out at once. None: with the next tick
+            (``Writers.sweep``).
     """
 
     def __init__(self, robot: VirtualRobot, bridge: Bridge,
                  loop: asyncio.AbstractEventLoop, writers: Writers | None = None) -> None:
         self._bridge = bridge
+
+        def write_queued() -> None:  # what a function handed to the loop queued, at once
+            if writers is not None:
+                writers.write(bridge.take_flush())
+
+        access = LoopAccess(loop, after=write_queued)
         self.context = Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         try:
-            self.robot_node = VirtualRobotNode(robot, access=LoopAccess(loop), own_timer=False,
+            self.robot_node = VirtualRobotNode(robot, access=access, own_timer=False,
                                                ignore_cmd_vel_from=RELAY_NODE_NAME,
                                                context=self.context)
             self.relay_node = Node(RELAY_NODE_NAME, context=self.context)
@@ -87,19 +93,13 @@ class RosRuntime:
             with contextlib.suppress(RuntimeError):  # the loop closed while shutting down
                 loop.call_soon_threadsafe(publish, topic, msg, latched)
 
-        def post(fn: Callable[[], None]) -> None:  # an action's answer, written at once
-            def run() -> None:
-                fn()
-                if writers is not None:
-                    writers.write(bridge.take_flush())
-            LoopAccess(loop).post(run)
-
         self.relay = GraphRelay(self.relay_node, deliver)
         self.executor = SingleThreadedExecutor(context=self.context)
-        self.relay.services = GraphServices(self.relay_node, self.executor, loop)
+        self.relay.services = GraphServices(self.relay_node, self.executor, loop,
+                                            post=access.post)
         self.executor.add_node(self.robot_node)
         self.executor.add_node(self.relay_node)
-        self.actions = RosActions(self.relay_node, post, loop.call_later, self.executor)
+        self.actions = RosActions(self.relay_node, access.post, loop.call_later, self.executor)
         self._thread = threading.Thread(target=self._spin, name="rclpy-executor", daemon=True)
 
     def start(self) -> None:

@@ -79,13 +79,29 @@ class LoopAccess:
     Args:
         loop: the running loop; build this object on its thread.
         timeout_s: how long ``call`` waits.
+        after: run on the loop after each function handed over (the server writes what the
+            function queued for clients, at once rather than with the next tick).
     """
 
     def __init__(self, loop: asyncio.AbstractEventLoop,
-                 timeout_s: float = CALL_TIMEOUT_S) -> None:
+                 timeout_s: float = CALL_TIMEOUT_S,
+                 after: Callable[[], None] | None = None) -> None:
         self._loop = loop
         self._loop_thread = threading.get_ident()
         self._timeout_s = timeout_s
+        self._after = after
+
+    def _then_after(self, fn: Callable[[], T]) -> Callable[[], T]:
+        after = self._after
+        if after is None:
+            return fn
+
+        def run() -> T:
+            try:
+                return fn()
+            finally:
+                after()
+        return run
 
     def call(self, fn: Callable[[], T]) -> T:
         """Run ``fn`` on the loop and return its result.
@@ -93,6 +109,7 @@ class LoopAccess:
         Raises:
             TimeoutError: the loop did not run it within the timeout (it is stopping).
         """
+        fn = self._then_after(fn)
         if threading.get_ident() == self._loop_thread:
             return fn()
         future: concurrent.futures.Future[T] = concurrent.futures.Future()
@@ -114,7 +131,7 @@ class LoopAccess:
     def post(self, fn: Callable[[], None]) -> None:
         """Run ``fn`` on the loop soon; dropped if the loop has closed."""
         try:
-            self._loop.call_soon_threadsafe(fn)
+            self._loop.call_soon_threadsafe(self._then_after(fn))
         except RuntimeError:
             log.debug("event loop closed; dropped a call")
 

@@ -69,13 +69,17 @@ class GraphServices:
         node: the relay node (``rosbridge_websocket``).
         executor: the executor spinning ``node`` (its futures wake it).
         loop: the event loop the bridge runs on.
+        post: runs a function on ``loop`` from the executor's thread (default:
+            ``loop.call_soon_threadsafe``; the server's writes what it queued at once).
     """
 
     def __init__(self, node: Node, executor: Executor,
-                 loop: asyncio.AbstractEventLoop) -> None:
+                 loop: asyncio.AbstractEventLoop,
+                 post: Callable[[Callable[[], None]], None] | None = None) -> None:
         self._node = node
         self._executor = executor
         self._loop = loop
+        self._post_to_loop = post
         self._clients: OrderedDict[tuple[str, str], Any] = OrderedDict()
         self._offered: dict[str, _Offer] = {}
 
@@ -226,6 +230,9 @@ class GraphServices:
         return frozenset(self._offered)
 
     def _post(self, fn: Callable[[], None]) -> None:
+        if self._post_to_loop is not None:
+            self._post_to_loop(fn)
+            return
         try:
             self._loop.call_soon_threadsafe(fn)
         except RuntimeError:  # the loop closed while shutting down
