@@ -21,6 +21,7 @@ from typing import Any
 
 from physics import TICK_PERIOD_S, ConfigError
 from ros_nodes.robot_endpoint import RobotEndpoint
+from ros_nodes.robot_interface import RESERVED_NAMESPACES
 from ros_nodes.robot_services import require_admin
 from ros_nodes.sensors import Sensor
 from ros_nodes.virtual_robot_core import VirtualRobot
@@ -93,7 +94,8 @@ class RobotHost:
         self.robot = robot
         self.faults = Faults()
         clock = robot.clock
-        self.bridge = Bridge(clock=clock, faults=self.faults, refusals=(ConfigError,))
+        self.bridge = Bridge(clock=clock, faults=self.faults, refusals=(ConfigError,),
+                             reserved_namespaces=RESERVED_NAMESPACES)
         self.endpoint = RobotEndpoint(self.bridge, robot)
         self.stats = TickStats()
         self.schedule = schedule or Schedule(TICK_PERIOD_S)

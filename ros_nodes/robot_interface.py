@@ -78,6 +78,10 @@ NODE_BASENAME = "virtual_robot"
 NODE_NAME = f"/{NODE_BASENAME}"
 """The robot node's fully qualified name (the root namespace)."""
 
+RESERVED_NAMESPACES = (f"{NODE_NAME}/", "/rosapi/", "/websim/")
+"""The namespaces of the simulator's own services (the robot node's, rosapi's, websim's):
+clients may not offer services or actions in them."""
+
 ROSOUT = TopicSpec("/rosout", "rcl_interfaces/msg/Log", "out", 0, "transient_local",
                    "the node's log lines (start, reset, parameter changes, refused commands)",
                    event=True)

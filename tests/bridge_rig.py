@@ -1,76 +1,61 @@
-"""A robot and its bridge driven in-process, for the tests of the protocol layer.
+"""The robot rig as the protocol tests use it: the test moves the clock, ticks do not.
 
-The Bridge does no I/O, so these tests feed it frames and read what it queued per client.
-A hand-advanced monotonic clock stands in for time where throttling and timeouts are checked.
+The Bridge does no I/O, so these tests feed it frames and read what it queued per client
+(``robot_rig``: the robot, its host and bridge, as ``websim serve`` builds them). Here the
+clock stands still while the robot ticks: a test that checks throttling or timeouts sets
+``rig.clock.now_s`` itself.
 """
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
-import cbor2
+from robot_rig import RobotRig, robot_rig
 
-from physics import LidarParams, Simulation, load_world
+from physics import LidarParams
 from ros_nodes.robot_endpoint import RobotEndpoint
-from ros_nodes.virtual_robot_core import VirtualRobot
-from rosbridge.core.bridge import Bridge, Session
-from rosbridge.core.clock import ManualClock
-from rosbridge.core.outbox import Outbox
+
+START_S = 100.0
+"""The clock's monotonic time when a rig starts (s)."""
+
+START_STAMP_S = 1_700_000_000.25
+"""The robot's stamps at ``START_S`` (s since the epoch)."""
 
 
 class Clock:
+    """A clock whose monotonic time a test sets (``now_s``, forward or back); stamps follow."""
+
     def __init__(self) -> None:
-        self.now_s = 100.0
+        self.now_s = START_S
+
+    def monotonic_s(self) -> float:
+        """``now_s``."""
+        return self.now_s
+
+    def stamp_s(self) -> float:
+        """``START_STAMP_S`` at ``START_S``, moving with ``now_s``."""
+        return START_STAMP_S + (self.now_s - START_S)
 
     def __call__(self) -> float:
         return self.now_s
 
-    def monotonic_s(self) -> float:
-        return self.now_s
 
-    def stamp_s(self) -> float:
-        return 1_700_000_000.0 + self.now_s
-
-
-class Rig:
-    """A robot, its bridge, and helpers to act as clients."""
+class Rig(RobotRig):
+    """A hosted robot on a ``Clock`` that ticks without moving it."""
 
     def __init__(self, lidar: LidarParams | None = None) -> None:
-        self.clock = Clock()
-        self.robot = VirtualRobot(Simulation(load_world("empty"), lidar=lidar, seed=0),
-                                  clock=ManualClock(epoch_s=1_700_000_000.25))
-        self.bridge = Bridge(clock=self.clock)
-        self.endpoint = RobotEndpoint(self.bridge, self.robot)
+        rig = robot_rig("empty", lidar=lidar, clock=Clock())  # type: ignore[arg-type]
+        super().__init__(rig.host, rig.clock)
 
-    def client(self, admin: bool = False) -> Session:
-        session = Session("test-peer", admin, Outbox())
-        self.bridge.connect(session)
-        return session
+    @property
+    def endpoint(self) -> RobotEndpoint:
+        """The robot's endpoint on its bridge."""
+        return self.host.endpoint
 
-    def send(self, session: Session, message: Any) -> None:
-        self.bridge.handle(session, message if isinstance(message, (str, bytes))
-                           else json.dumps(message))
-
-    def tick(self, n: int = 1) -> None:
+    def tick(self, n: int = 1, lateness_s: float = 0.0) -> None:
+        """``n`` host ticks at the clock's present time."""
         for _ in range(n):
-            for spec, msg in self.robot.step():
-                self.bridge.publish(spec.name, msg)
-
-    @staticmethod
-    def drain(session: Session) -> list[Any]:
-        frames = []
-        while (frame := session.outbox.pop()) is not None:
-            frames.append(cbor2.loads(frame) if isinstance(frame, bytes) else json.loads(frame))
-        return frames
-
-    def call(self, session: Session, service: str, args: Any = None, call_id: str = "c1") -> Any:
-        self.send(session, {"op": "call_service", "service": service, "id": call_id,
-                            "args": {} if args is None else args})
-        replies = [f for f in self.drain(session) if f.get("op") == "service_response"]
-        assert len(replies) == 1, replies
-        assert replies[0]["id"] == call_id
-        return replies[0]
+            self.host.tick(lateness_s)
 
 
 def topics_of(frames: list[Any]) -> list[str]:

@@ -10,11 +10,11 @@ Every client (student or admin) may:
   the graph), but not the simulator's outputs (``/odom``, ``/scan``, ``/tf``...; refused by the
   bridge) nor ROS infrastructure topics (``/rosout``, ``/parameter_events``);
 * call any service (changing parameters then needs the admin token), and offer services of its
-  own, but not in the simulator's namespaces (``/virtual_robot/``, ``/rosapi/``,
-  ``/websim/``);
+  own, but not in the namespaces the bridge's owner reserves for its own nodes (the robot's:
+  ``/virtual_robot/``, ``/rosapi/``, ``/websim/``, ``ros_nodes.robot_interface``);
 * send goals to any action, and offer actions of its own, outside those namespaces too.
 
-Names are resolved and checked once, before this (``rosbridge.schema.resolve_name``), and one
+Names are resolved and checked once, before this (``rosbridge.core.schema.resolve_name``), and one
 client may hold at most ``ClientLimits.max_subscriptions`` subscriptions, ``max_advertised``
 advertised topics, ``max_services`` services and ``max_actions`` actions, so that one
 connection cannot grow the server's tables without bound.
@@ -29,11 +29,6 @@ from rosbridge.core.limits import ClientLimits
 
 RESERVED_TOPICS = frozenset({"/rosout", "/parameter_events"})
 """ROS infrastructure topics clients may not publish."""
-
-RESERVED_SERVICE_PREFIXES = ("/virtual_robot/", "/rosapi/", "/websim/")
-"""Namespaces of the simulator's own nodes; clients may not offer services or actions in
-them."""
-
 
 class AccessError(Exception):
     """An operation the allow-list refuses; the message is the reason sent back."""
@@ -63,12 +58,14 @@ class Holder(Protocol):
         """The bounds it lives within."""
 
 
-def check(client: Holder, op: str, name: str) -> None:
+def check(client: Holder, op: str, name: str, reserved: tuple[str, ...] = ()) -> None:
     """Raise ``AccessError`` unless ``client`` may do ``op`` on the topic, service or action.
 
     ``name`` is already resolved (``schema.resolve_name``). Operations that only give
     something up (``unsubscribe``, ``unadvertise``...) are always allowed. Topics the
-    simulator publishes are refused by the bridge, which knows who owns them.
+    simulator publishes are refused by the bridge, which knows who owns them. ``reserved``:
+    the namespaces (``"/virtual_robot/"``) in which clients may not offer services or
+    actions: the bridge's owner's own nodes.
     """
     limits = client.limits
     if op == "subscribe":
@@ -80,13 +77,13 @@ def check(client: Holder, op: str, name: str) -> None:
         if op == "advertise":
             _within(client.advertised, name, limits.max_advertised, "advertised topics")
     elif op == "advertise_service":
-        if name.startswith(RESERVED_SERVICE_PREFIXES):
-            raise AccessError(f"{name}: services under {', '.join(RESERVED_SERVICE_PREFIXES)} "
+        if reserved and name.startswith(reserved):
+            raise AccessError(f"{name}: services under {', '.join(reserved)} "
                               "belong to the simulator")
         _within(client.services, name, limits.max_services, "services")
     elif op == "advertise_action":
-        if name.startswith(RESERVED_SERVICE_PREFIXES):
-            raise AccessError(f"{name}: actions under {', '.join(RESERVED_SERVICE_PREFIXES)} "
+        if reserved and name.startswith(reserved):
+            raise AccessError(f"{name}: actions under {', '.join(reserved)} "
                               "belong to the simulator")
         _within(client.actions, name, limits.max_actions, "actions")
 

@@ -63,6 +63,8 @@ class Bridge:
         refusals: the errors of the bridge's owner that refuse an operation with a reason
             for the client (a robot's invalid command or parameter), besides the bridge's
             own ``BridgeError`` and ``MessageError``.
+        reserved_namespaces: the namespaces of the owner's own nodes (``"/virtual_robot/"``),
+            in which clients may not offer services or actions.
         service_timeout_s: how long a call to a client-provided service may take.
         faults: where unexpected exceptions are recorded (default: a new record).
 
@@ -80,7 +82,10 @@ class Bridge:
     def __init__(self, clock: Clock | None = None,
                  service_timeout_s: float = SERVICE_TIMEOUT_S,
                  faults: Faults | None = None,
-                 refusals: tuple[type[Exception], ...] = ()) -> None:
+                 refusals: tuple[type[Exception], ...] = (),
+                 reserved_namespaces: tuple[str, ...] = ()) -> None:
+        self.reserved_namespaces = reserved_namespaces
+        """Where clients may not offer services or actions: the owner's own nodes'."""
         self.clock: Clock = WallClock() if clock is None else clock
         self.refusals: tuple[type[Exception], ...] = (BridgeError, MessageError, *refusals)
         self.faults = faults or Faults()
@@ -207,7 +212,7 @@ class Bridge:
             if name_field is not None:
                 name = message[name_field] = resolve_name(message[name_field])
                 try:
-                    access.check(session, op, name)
+                    access.check(session, op, name, self.reserved_namespaces)
                 except access.AccessError as denied:
                     raise BridgeError(str(denied)) from None
             self._handlers[op](session, message)
