@@ -17,6 +17,7 @@ import contextlib
 import itertools
 import json
 import time
+import urllib.request
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -147,7 +148,8 @@ def dashboard(browser: Any, server: ServerProcess, token: str | None = ADMIN_TOK
     """/class (with ``?token=`` unless None) at 1280 x 800 in a fresh context, its config.json
     naming ``server``'s bridge; with a token, until ``count`` cards show their robot's pose."""
     context = browser.new_context(viewport=VIEWPORT)
-    config = {"ws": server.ws_url, "adminWs": None}
+    with urllib.request.urlopen(f"{server.http_url}/config.json", timeout=10) as served:
+        config = {**json.loads(served.read()), "ws": server.ws_url, "adminWs": None}
     context.route(f"{server.http_url}/config.json", lambda route: route.fulfill(
         status=200, content_type="application/json", body=json.dumps(config)))
     try:

@@ -81,7 +81,8 @@ class Site:
                 return self.new_robot_json
             url = f"ws://{_url_name(hostname)}:{self.ws_port}/"
             return json.dumps({"about": "the instructor's view of this class, filled by "
-                                        "websim serve", "ws": url, "adminWs": url})
+                                        "websim serve; robotsPath: where its robots' pages are",
+                               "ws": url, "adminWs": url, "robotsPath": ROBOTS_PREFIX})
         if name == "robot.json":
             host = dict(self.class_hosts()).get(robot)
             if host is None:

@@ -33,7 +33,7 @@ test('the pause badge tells the instructor\'s pause from an idle robot', () => {
 });
 
 test('a robot\'s page link and button labels', () => {
-  assert.equal(robotPageUrl('robot05'), '/robots/robot05/');
-  assert.equal(robotPageUrl('a b'), '/robots/a%20b/');
+  assert.equal(robotPageUrl('/robots/', 'robot05'), '/robots/robot05/');
+  assert.equal(robotPageUrl('/robots/', 'a b'), '/robots/a%20b/');
   assert.equal(capitalized('dynamic'), 'Dynamic');
 });

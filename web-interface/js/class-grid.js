@@ -17,9 +17,9 @@ export function capitalized(text) {
   return text.charAt(0).toUpperCase() + text.slice(1);
 }
 
-/** A robot's page on this server (the class's pages are at /robots/NAME/). */
-export function robotPageUrl(name) {
-  return `/robots/${encodeURIComponent(name)}/`;
+/** A robot's page on this server: robotsPath (config.json's, "/robots/") + NAME + "/". */
+export function robotPageUrl(robotsPath, name) {
+  return `${robotsPath}${encodeURIComponent(name)}/`;
 }
 
 /** The clients line of a status: "3", or "3 (1 admin)"; the dashboard is an admin client. */
@@ -49,7 +49,8 @@ export class ClassGrid {
    * @param {object} robot the robot description (robot.js)
    * @param {{onAction: (name: string, action: string) => void}} options
    */
-  constructor(container, template, robot, { onAction }) {
+  constructor(container, template, robot, { robotsPath, onAction }) {
+    this.robotsPath = robotsPath;
     this.container = container;
     this.template = template;
     this.robot = robot;
@@ -89,7 +90,7 @@ export class ClassGrid {
       const action = (name) => element.querySelector(`[data-action="${name}"]`);
       field('name').textContent = state.name;
       const link = field('open');
-      link.href = robotPageUrl(state.name);
+      link.href = robotPageUrl(this.robotsPath, state.name);
       link.title = `Open ${state.name}'s page in a new tab`;
       action('mode').textContent = capitalized(this.pressedMode);
       action('mode').title = `Motion model: pressed is ${this.pressedMode}, released `

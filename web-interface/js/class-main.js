@@ -110,6 +110,7 @@ async function main() {
     stateOf(name), action, call).finally(() => poller.pollNow(name));
 
   const grid = new ClassGrid($('#class-grid'), $('#robot-card'), robot, {
+    robotsPath: config.robotsPath,
     onAction: (name, action) => act(name, action).catch(() => {}), // shown in its card
   });
 
