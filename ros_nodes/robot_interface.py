@@ -91,7 +91,7 @@ PARAMETER_EVENTS = TopicSpec("/parameter_events", "rcl_interfaces/msg/ParameterE
 NODE_TOPICS = (ROSOUT, PARAMETER_EVENTS)
 """What every ROS 2 node publishes besides its own topics: rclpy does it for the virtual_robot
 node on a graph; the embedded bridge publishes them for the simulator
-(``rosbridge.rosout``)."""
+(``ros_nodes.rosout``)."""
 
 RESET_SERVICE = "/reset_simulation"
 """``std_srvs/srv/Empty``: back to spawn with odometry zeroed (as gazebo_ros offers it)."""

@@ -61,7 +61,7 @@ ROSAPI_PARAMS_NODE = "/rosapi_params"
 ROS_VERSION = 2
 ROS_DISTRO = "humble"
 """What ``get_ros_version`` answers: the distribution whose definitions the bridge uses
-(``message_types``) and the Docker stack's default."""
+(``rosbridge.msgs.definitions``) and the Docker stack's default."""
 
 ADMIN_HINT = "connect with the admin token: ws://HOST:9090/?token=TOKEN"
 

@@ -4,10 +4,10 @@ The ``ActionGraph`` behind ``capabilities.actions``: a client's goal to an actio
 provides goes to the graph's server through an rclpy ``ActionClient`` (one per action,
 kept), its feedback and result come back; a client's advertised action is offered on the
 graph through an rclpy ``ActionServer`` whose goals go to that client. Types are imported
-from their packages by name (``action_class``), as ``ros_interop.message_class`` does for
+from their packages by name (``action_class``), as ``rclpy_conversion.message_class`` does for
 messages, so any installed action type works.
 
-Threads, as in ``ros_graph``: the methods run on the event loop that owns the bridge;
+Threads, as in ``relay``: the methods run on the event loop that owns the bridge;
 rclpy's callbacks run on the executor thread and hand everything to the loop
 (``LoopAccess.post``). A served goal's execute callback is a coroutine that awaits a future
 the loop completes, so the single-threaded executor goes on meanwhile.

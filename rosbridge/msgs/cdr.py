@@ -2,7 +2,7 @@
 
 rosbridge's ``cbor-raw`` hands a client the bytes rclpy received; websim has no rclpy, so a
 message is serialized here with the rosbags typestore's CDR serializer (the definitions
-``message_types`` checks messages against, little-endian, with the 4-byte encapsulation
+``definitions`` checks messages against, little-endian, with the 4-byte encapsulation
 header first, as rclpy delivers them). Only types that typestore knows can be serialized.
 """
 
@@ -17,8 +17,7 @@ import numpy as np
 from rosbags.interfaces import Nodetype
 from rosbags.typesys import get_typestore
 
-from rosbridge.msgs import checks
-from rosbridge.msgs import definitions as message_types
+from rosbridge.msgs import checks, definitions
 from rosbridge.msgs.definitions import EMPTY_PLACEHOLDER
 
 NUMPY_TYPES = {
@@ -36,9 +35,9 @@ class CdrError(ValueError):
 
 @functools.cache
 def _typestore() -> Any:
-    """The typestore of ``message_types``, with the shipped definitions (built once)."""
-    store = get_typestore(message_types.TYPESTORE)
-    store.register(message_types.shipped_definitions())
+    """The typestore of ``definitions``, with the shipped definitions (built once)."""
+    store = get_typestore(definitions.TYPESTORE)
+    store.register(definitions.shipped_definitions())
     return store
 
 
@@ -48,7 +47,7 @@ def serializable(type_name: str) -> bool:
 
 
 def to_cdr(type_name: str, msg: Any) -> bytes:
-    """``msg``, a canonical ``type_name`` message (``message_types.canonical``), in CDR.
+    """``msg``, a canonical ``type_name`` message (``definitions.canonical``), in CDR.
 
     Raises:
         CdrError: the type is unknown here, or a field does not fit it.

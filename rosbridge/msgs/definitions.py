@@ -6,15 +6,15 @@ get their defaults, as rosbridge fills them), refuses fields the type lacks, val
 wrong type and integers out of their type's range, and accepts ROS 1's ``{secs, nsecs}``
 stamp spelling (what roslibpy's ``Header`` writes, with its ``seq``, which is dropped). A
 megabyte of extra fields on a Twist is an error, not a megabyte sent to every subscriber.
-Numeric arrays come out as ``messages.typed_sequence`` s and byte arrays (``uint8[]``,
-``byte[]``) as ``messages.Base64Bytes``, so the encoders write them as rosbridge does (base64
+Numeric arrays come out as ``values.typed_sequence`` s and byte arrays (``uint8[]``,
+``byte[]``) as ``values.Base64Bytes``, so the encoders write them as rosbridge does (base64
 text in JSON; typed arrays and byte strings in CBOR), whichever spelling the client sent.
 
 The definitions are those of ROS 2 Humble's standard message packages, from the rosbags
 typestore (a maintained, ROS-free copy of them): std_msgs, geometry_msgs, sensor_msgs,
 nav_msgs, tf2_msgs, visualization_msgs, builtin_interfaces, rcl_interfaces and more, plus
 the packages it lacks that courses use, shipped as their ROS 2 ``.msg`` (or ``.idl``) text
-in ``ros_nodes/interfaces/<package>/msg/`` (example_interfaces). A type defined nowhere is
+in ``rosbridge/msgs/interfaces/<package>/msg/`` (example_interfaces). A type defined nowhere is
 refused (``check_type``) with rosbridge's reason; with ``websim serve --ros`` the types of
 every installed ROS 2 package count too (``graph=True``: converted through their rclpy
 classes, ``rosbridge.msgs.rclpy_conversion``).
@@ -170,7 +170,7 @@ def canonical(type_name: str, msg: Any, *, graph: bool = False) -> dict[str, Any
         type_name: ``pkg/msg/Type``.
         msg: the message as a client sent it.
         graph: a ROS 2 graph is attached (``--ros``): a type defined only by an installed
-            rclpy package is converted through its class (``ros_interop``).
+            rclpy package is converted through its class (``rclpy_conversion``).
 
     Raises:
         MessageError: ``type_name`` is not known (``check_type``), or ``msg`` does not fit

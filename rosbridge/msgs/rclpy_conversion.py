@@ -5,11 +5,11 @@
 ``get_fields_and_field_types()``, so one function serves every type, including types this
 project never heard of (a student's topic relayed to the browser). The dicts follow
 rosbridge's JSON conventions: ``uint8[]`` and ``byte[]`` are base64 text
-(``messages.Base64Bytes``), other numeric arrays come out as ``messages.typed_sequence`` s (so
+(``values.Base64Bytes``), other numeric arrays come out as ``values.typed_sequence`` s (so
 CBOR packs them as typed arrays) and JSON ``null`` in a float field is NaN (the encoders write
 non-finite floats as ``null``).
 
-Every value is checked here, by ``message_types``' rules, before rclpy sees it: rclpy's own
+Every value is checked here, by ``checks``' rules, before rclpy sees it: rclpy's own
 field checks are off by default since Jazzy (``ROS_PYTHON_CHECK_FIELDS``), and an int8 of
 32767 would otherwise go out as -1. ROS 1's ``{secs, nsecs}`` stamps are accepted
 (``checks.from_ros1``), as rosbridge accepts them.

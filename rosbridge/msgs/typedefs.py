@@ -2,7 +2,7 @@
 
 rosapi on ROS 2 builds a TypeDef from the type's generated Python class; here it is built from
 the same definitions the bridge validates messages with (the rosbags typestore of ROS 2
-Humble, see ``message_types``), plus the services the embedded bridge offers
+Humble, see ``definitions``), plus the services the embedded bridge offers
 (``SERVICE_DEFINITIONS``: rosbags holds no services). What it gives, as rosapi gives it:
 
 * ``type`` and nested ``fieldtypes`` in the ``pkg/Type`` form (``geometry_msgs/Vector3``,

@@ -2,7 +2,7 @@
 
 rosbridge's promise for queue_length 0 with no throttle is every message; websim keeps it
 from the graph too: the relay's subscription to a reliable publisher is deep enough that DDS
-does not drop what the relay has not taken yet (``ros_graph.RELIABLE_RELAY_DEPTH``).
+does not drop what the relay has not taken yet (``rosbridge.graph.relay.RELIABLE_RELAY_DEPTH``).
 ``benchmarks/ros_burst.py`` prints the same for 1000 messages.
 """
 

@@ -40,7 +40,7 @@ from std_msgs.msg import (  # noqa: E402
 from test_typed_relay import NODE, NodeSubscriber, RawClient  # noqa: E402
 from websockets.sync.client import connect  # noqa: E402
 
-from rosbridge.msgs import definitions as message_types  # noqa: E402
+from rosbridge.msgs import definitions  # noqa: E402
 
 from ros_fixtures import LATCHED, RELIABLE, STARTUP_TIMEOUT_S, Graph  # noqa: E402
 from server_process import ServerProcess, wait_for  # noqa: E402
@@ -148,7 +148,7 @@ def test_an_int8_out_of_range_is_refused_not_sent_to_the_graph_as_minus_1(
 def test_a_type_only_an_installed_package_defines_is_checked_through_rclpy(
         graph: Graph, raw: RawClient) -> None:
     type_name = "service_msgs/msg/ServiceEventInfo"  # a dependency of rclpy's since Jazzy
-    assert not message_types.known(type_name)
+    assert not definitions.known(type_name)
     received = graph.collect(ServiceEventInfo, "/events", RELIABLE)
     raw.send(op="advertise", topic="/wangle", type="wangle_msgs/msg/Jam")
     raw.send(op="advertise", topic="/events", type=type_name)

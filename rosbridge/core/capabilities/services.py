@@ -16,7 +16,7 @@ from typing import Any
 from rosbridge.core.context import BridgeContext
 from rosbridge.core.errors import BridgeError, shorten
 from rosbridge.core.session import Session
-from rosbridge.msgs import definitions as message_types
+from rosbridge.msgs import definitions
 from rosbridge.msgs.values import normalize_service_type
 
 log = logging.getLogger("websim.bridge")
@@ -76,29 +76,29 @@ def request_args(service_type: str, args: Any) -> Any:
         MessageError: the args do not fit the request type.
     """
     request_type = f"{service_type}_Request"
-    if not message_types.known(request_type):
+    if not definitions.known(request_type):
         return args
     if args in ([], None):  # roslibpy and roslibjs send [] for an empty request
         args = {}
-    return message_types.canonical(request_type, args)
+    return definitions.canonical(request_type, args)
 
 
 def response_values(service_type: str | None, values: Any) -> Any:
     """A provider's response values in canonical form, where the service type is known.
 
     rosbridge fills the ROS response from them (defaults for what is missing, refusing what
-    the type lacks); websim does the same with the type's definition (``message_types``),
+    the type lacks); websim does the same with the type's definition (``definitions``),
     and passes an unknown type's values as they are.
 
     Raises:
         MessageError: the values do not fit the response type.
     """
     response_type = f"{service_type}_Response" if service_type else None
-    if response_type is None or not message_types.known(response_type):
+    if response_type is None or not definitions.known(response_type):
         return values
     if values in ([], None):  # roslibpy and roslibjs send [] for an empty response
         values = {}
-    return message_types.canonical(response_type, values)
+    return definitions.canonical(response_type, values)
 
 
 class Services:

@@ -3,7 +3,7 @@
 The one path for every message: a client's ``publish`` and an in-process endpoint's
 (``publish``, e.g. the robot's /odom) both go through ``_deliver``, and in-process subscribers
 (``subscribe_local``, e.g. the robot's /cmd_vel) get what clients publish, as another client
-would. Every message is relayed in its canonical form (``message_types``: defaults filled,
+would. Every message is relayed in its canonical form (``definitions``: defaults filled,
 unknown fields refused); a type websim cannot check (not among its definitions, nor with
 ``--ros`` importable) is refused at advertise, subscribe and publish, as rosbridge refuses a
 type it cannot import.
@@ -22,8 +22,7 @@ from rosbridge.core.errors import BridgeError
 from rosbridge.core.fragments import fragment
 from rosbridge.core.outbox import Frames
 from rosbridge.core.session import Session, Subscription
-from rosbridge.msgs import cdr
-from rosbridge.msgs import definitions as message_types
+from rosbridge.msgs import cdr, definitions
 from rosbridge.msgs.values import normalize_type
 
 log = logging.getLogger("websim.bridge")
@@ -138,7 +137,7 @@ class Topics:
         """(client, topic) advertised with ``latch: true``: its every publish is latched."""
         self._published_s: dict[Session, float] = {}
         """When each client last published (monotonic s): the fan-out serves them first."""
-        message_types.load()  # now, not at the first publish (it takes ~0.1 s)
+        definitions.load()  # now, not at the first publish (it takes ~0.1 s)
 
     def handlers(self) -> dict[str, Callable[[Session, dict[str, Any]], None]]:
         """This capability's ops."""
@@ -232,7 +231,7 @@ class Topics:
         self._refuse_owned(topic)
         type_name = self._known_type(topic, message["type"])
         try:
-            message_types.check_type(type_name, graph=self._context.graph.attached)
+            definitions.check_type(type_name, graph=self._context.graph.attached)
         except self._context.refusals as error:
             raise BridgeError(f"advertise {topic}: {error}") from None
         self._types[topic] = type_name
@@ -274,7 +273,7 @@ class Topics:
                               "advertised (advertise it with its type first)")
         msg = message["msg"]
         try:
-            msg = message_types.canonical(type_name, msg, graph=self._context.graph.attached)
+            msg = definitions.canonical(type_name, msg, graph=self._context.graph.attached)
         except self._context.refusals as error:
             raise BridgeError(f"publish to {topic}: {error}") from None
         size = session.frame_bytes  # what arrived: known before anything is encoded
@@ -388,7 +387,7 @@ class Topics:
         if message.get("type"):
             try:
                 named_type = self._known_type(topic, message["type"])
-                message_types.check_type(named_type, graph=self._context.graph.attached)
+                definitions.check_type(named_type, graph=self._context.graph.attached)
             except self._context.refusals as error:
                 raise BridgeError(f"subscribe {topic}: {error}") from None
         limits = session.limits
