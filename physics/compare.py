@@ -34,6 +34,7 @@ import yaml
 
 from physics.params import LidarParams, NoiseParams, RobotParams
 from physics.pid import CONTROL_PERIOD_S, HeadingPid, PidGains, wrap_angle
+from physics.shipped import shipped
 from physics.simulation import Simulation
 from physics.validation import (
     ConfigError,
@@ -43,6 +44,10 @@ from physics.validation import (
     check_keys,
 )
 from physics.world import World
+
+COMMANDS_DIR = shipped("physics", "examples/commands")
+"""The shipped command files (``step``, ``circle``, ``square``, ``payload_bonus``), found by
+name as worlds are."""
 
 MODES_COMPARED = ("kinematic", "dynamic")
 
@@ -133,18 +138,29 @@ class Comparison:
         return [row for row in self.rows if row.mode == mode]
 
 
+def resolve_commands_path(path: str | Path) -> Path:
+    """``path`` itself, or for a bare name (``"step"``) the shipped command file of that name."""
+    path = Path(path)
+    if path.exists() or path.suffix or len(path.parts) > 1:
+        return path
+    return COMMANDS_DIR / f"{path}.yaml"
+
+
 def load_commands(path: str | Path) -> tuple[Segment, ...]:
-    """Read a command file (``.yaml``/``.yml`` or ``.csv``).
+    """Read a command file (``.yaml``/``.yml`` or ``.csv``), or a shipped one by name (``step``).
 
     Raises:
         ConfigError: unreadable file or a bad segment; the message names the segment and field.
     """
     source = str(path)
+    resolved = resolve_commands_path(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = resolved.read_text(encoding="utf-8")
     except OSError as error:
-        raise ConfigError(f"{source}: cannot read command file: {error.strerror}") from None
-    if Path(path).suffix.lower() == ".csv":
+        known = ", ".join(sorted(shipped.stem for shipped in COMMANDS_DIR.glob("*.yaml")))
+        raise ConfigError(f"{source}: cannot read command file: {error.strerror} "
+                          f"(shipped command files: {known})") from None
+    if resolved.suffix.lower() == ".csv":
         items: Any = [{key: value for key, value in row.items() if value not in ("", None)}
                       for row in csv.DictReader(text.splitlines())]
         items = [{key: _csv_number(source, index, key, value) for key, value in row.items()}

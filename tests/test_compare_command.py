@@ -15,7 +15,7 @@ from physics import RobotParams, compare_modes, load_commands, load_world
 from physics.compare import TRAJECTORY_COLUMNS, HeadingController
 from physics.pid import PidGains
 from websim.cli import main
-from websim.compare_command import progress_bar
+from websim.compare_command import plots_hint, progress_bar
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "commands"
 STEP = EXAMPLES / "step.yaml"
@@ -84,8 +84,9 @@ def test_without_matplotlib_the_rest_still_runs(tmp_path: Path,
     assert (out / "trajectory.csv").exists() and (out / "summary.json").exists()
     assert not (out / "comparison.png").exists()
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "pip install 'websim[plots]'" in err[0]
-    assert "pip install -e '.[plots]'" in err[0]
+    assert len(err) == 1 and err[0].endswith(f"matplotlib is not installed: {plots_hint()}")
+    checkout = Path(__file__).resolve().parent.parent  # run from a checkout: its own extra
+    assert f"pip install -e '{checkout}[plots]'" in err[0]
 
 
 def test_heavier_robot_doubles_the_dynamic_rise_time(tmp_path: Path) -> None:
@@ -125,6 +126,33 @@ def test_bad_command_file_is_a_one_line_error(tmp_path: Path,
     assert err.startswith(f"websim: error: {commands}: segment 2: unknown key 'linear'; "
                           "did you mean 'linear_mps'?")
     assert len(err.strip().splitlines()) == 1
+
+
+def test_a_shipped_command_file_is_found_by_name_from_any_folder(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)  # no examples/ here: the name is looked up where websim ships it
+    assert main(["compare", "--commands", "step", "--out", str(tmp_path / "out")]) == 0
+    assert len(read_rows(tmp_path)) == 2 * (1 + STEP_TICKS)
+    assert load_commands("step") == load_commands(STEP)
+
+
+def test_an_unknown_command_name_lists_the_shipped_ones(tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_compare(tmp_path, commands=Path("stpe")) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("websim: error: stpe: cannot read command file")
+    assert "(shipped command files: circle, payload_bonus, square, step)" in err
+
+
+@pytest.mark.parametrize(("prefix", "from_checkout", "hint"), [
+    ("/home/s/websim/.venv", True, "pip install -e '/home/s/websim[plots]'"),
+    ("/home/s/.local/pipx/venvs/websim", False, "pipx inject websim matplotlib"),
+    ("/home/s/venv", False, "/home/s/venv/bin/python -m pip install matplotlib"),
+])
+def test_the_plots_hint_fits_how_websim_was_installed(prefix: str, from_checkout: bool,
+                                                      hint: str) -> None:
+    assert plots_hint(prefix, from_checkout, Path("/home/s/websim")) == hint
+    assert "websim[plots]" not in plots_hint(prefix, False, Path("/x"))  # PyPI's is not ours
 
 
 def test_controller_options_need_the_controller(tmp_path: Path,

@@ -100,6 +100,8 @@ def test_the_wheel_carries_parameters_worlds_and_exactly_the_published_page(
         installed: Installed) -> None:
     names = set(zipfile.ZipFile(installed.wheel).namelist())
     assert "physics/_share/config/pi4b_params.yaml" in names
+    assert {f"physics/_share/examples/commands/{commands.name}" for commands in
+            (PROJECT_DIR / "examples" / "commands").glob("*.yaml")} <= names
     assert {f"physics/_share/worlds/{world.name}" for world in
             (PROJECT_DIR / "worlds").glob("*.yaml")} <= names
     page = {name.removeprefix(WEB_SHARE) for name in names if name.startswith(WEB_SHARE)}
@@ -138,3 +140,12 @@ def test_worlds_load_by_name_from_the_installed_package(installed: Installed) ->
                             cwd=installed.folder, capture_output=True, text=True, timeout=120,
                             check=False)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_command_files_load_by_name_from_the_installed_package(installed: Installed) -> None:
+    out = installed.folder / "results"
+    result = subprocess.run([*installed.command, "compare", "--commands", "step", "--out",
+                             str(out)], cwd=installed.folder, capture_output=True, text=True,
+                            timeout=300, check=False)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert (out / "summary.json").is_file()

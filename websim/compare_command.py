@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from physics import TICK_PERIOD_S, ConfigError, RobotParams, World, load_params, load_world
 from physics.compare import (
+    COMMANDS_DIR,
     HEADING_FEEDBACK,
     MODES_COMPARED,
     TRAJECTORY_COLUMNS,
@@ -32,10 +33,26 @@ from physics.compare import (
     load_commands,
 )
 from physics.pid import PidGains
+from physics.shipped import CHECKOUT_DIR, FROM_CHECKOUT
 from physics.validation import check_keys
 
-PLOTS_HINT = ("pip install 'websim[plots]' (in a checkout: pip install -e '.[plots]')")
-"""How to get matplotlib, the optional dependency of ``comparison.png``."""
+
+def plots_hint(prefix: str = sys.prefix, from_checkout: bool = FROM_CHECKOUT,
+               checkout: Path = CHECKOUT_DIR) -> str:
+    """How to get matplotlib (``comparison.png``'s optional dependency) for this install.
+
+    Not ``pip install 'websim[plots]'``: the package index's ``websim`` is another project.
+
+    Args:
+        prefix: the Python environment websim runs in (``sys.prefix``).
+        from_checkout: websim runs from a checkout (an editable install of one).
+        checkout: that checkout's folder.
+    """
+    if from_checkout:
+        return f"pip install -e '{checkout}[plots]'"
+    if "pipx" in Path(prefix).parts:
+        return "pipx inject websim matplotlib"
+    return f"{Path(prefix) / 'bin' / 'python'} -m pip install matplotlib"
 
 PROGRESS_DELAY_S = 1.0
 """Wall time before the progress bar appears: a short run prints nothing."""
@@ -53,11 +70,17 @@ MODE_STYLES = {"kinematic": ("tab:blue", "-"), "dynamic": ("tab:orange", "-")}
 """Line colour and style of each mode in the figure."""
 
 
+def shipped_commands() -> list[str]:
+    """The names of the shipped command files (``--commands step``)."""
+    return sorted(path.stem for path in COMMANDS_DIR.glob("*.yaml"))
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``websim compare`` (besides world, params and seed)."""
     parser.add_argument("--commands", required=True,
                         help="command file: a YAML list (or CSV) of segments with duration_s, "
-                             "linear_mps, angular_rps and optional mass_kg, inertia_kg_m2")
+                             "linear_mps, angular_rps and optional mass_kg, inertia_kg_m2; "
+                             "or a shipped one by name: " + ", ".join(shipped_commands()))
     parser.add_argument("--out", required=True, type=Path,
                         help="directory for trajectory.csv, summary.json, comparison.png")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
@@ -156,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
         written.append(write_figure(result, world, segments, figure_path, title=title,
                                     controller=controller))
     except ImportError:
-        print(f"websim: {figure_path.name} skipped, matplotlib is not installed: {PLOTS_HINT}",
+        print(f"websim: {figure_path.name} skipped, matplotlib is not installed: {plots_hint()}",
               file=sys.stderr)
     difference = result.summary["difference"]
     print(f"wrote {', '.join(str(path) for path in written)}")
