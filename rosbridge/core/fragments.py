@@ -30,6 +30,27 @@ is raised for that message, so a client cannot make the server build and queue a
 some 60 bytes of framing for every character of a /scan."""
 
 
+MIN_TOPIC_FRAGMENT_SIZE = 256
+"""The smallest ``fragment_size`` a topic message is cut by: a client's smaller one is
+raised to it. A fragment op's own fields take some 70 bytes, so smaller fragments would be
+mostly framing (a /scan in 300 frames of 30 characters); rosbridge sets no minimum, and its
+clients that fragment ask for kilobytes."""
+
+
+def topic_fragment_size(fragment_size: int | None) -> int | None:
+    """The ``fragment_size`` a topic message is cut by for a client that asked for this one.
+
+    Rounded down to a power of two, at least ``MIN_TOPIC_FRAGMENT_SIZE``: every fragment is
+    still at most what the client asked for (above the minimum), and a message has at most
+    a dozen fragmented forms (256 B to 1 MiB), however many clients ask for however many
+    sizes; they are made once each for all of them (``capabilities.topics.Encoded``).
+    Replies are cut at the client's own size: they are made for that client alone.
+    """
+    if fragment_size is None:
+        return None
+    return max(MIN_TOPIC_FRAGMENT_SIZE, 1 << (fragment_size.bit_length() - 1))
+
+
 def fragment(text: str, fragment_size: int, message_id: Any = None) -> tuple[str, ...]:
     """``text`` as the JSON texts of its ``fragment`` messages (rosbridge's fields).
 

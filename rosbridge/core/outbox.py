@@ -11,15 +11,22 @@ Everything waiting is counted in bytes: past ``max_bytes``, or past ``max_replie
 the outbox is marked ``overflowed`` with the reason, and the server closes the client (it is
 not reading).
 
-An outbox only holds frames: it calls nobody. Whoever queues into it reports the client as
-ready (``Session.ready``), and the core's entry points return who must be written
-(``Flush``); the transport writes it (``take``, ``pop``).
+A topic frame may be ``Deferred``: an expensive format (``png``, ``cbor-raw``, fragments) is
+made when the frame is taken to be written, not when it is queued, so its cost falls on the
+client that asked for it (its connection charges ``encode_s`` to its handling budget), never
+on the tick or on the publisher; one that a newer frame replaces is never made at all.
+
+An outbox only holds frames: it calls nobody but the ``Deferred`` it was given. Whoever
+queues into it reports the client as ready (``Session.ready``), and the core's entry points
+return who must be written (``Flush``); the transport writes it (``take``, ``pop``).
 """
 
 from __future__ import annotations
 
 import itertools
+import time
 from collections import deque
+from collections.abc import Callable
 
 Frame = str | bytes
 """A WebSocket message: text (JSON) or binary (CBOR)."""
@@ -29,11 +36,34 @@ Frames = Frame | tuple[Frame, ...]
 dropped and counted together and sent one after the other."""
 
 
-def _sequence_of(entry: tuple[int, Frames]) -> int:
+class Deferred:
+    """A topic message's frames, made only when they are taken to be written.
+
+    Args:
+        make: makes the frames (never raises: a message that cannot be written in the
+            format comes back as an error ``status`` frame).
+        size: what it is counted as while it waits (its JSON text's length: about what a
+            PNG or CDR of it takes, a little less than its fragments).
+    """
+
+    __slots__ = ("make", "size")
+
+    def __init__(self, make: Callable[[], Frames], size: int) -> None:
+        self.make = make
+        self.size = size
+
+
+Entry = Frames | Deferred
+"""What a topic queue holds: frames, or frames still to be made."""
+
+
+def _sequence_of(entry: tuple[int, Entry]) -> int:
     return entry[0]
 
 
-def _size(frames: Frames) -> int:
+def _size(frames: Entry) -> int:
+    if isinstance(frames, Deferred):
+        return frames.size
     return sum(map(len, frames)) if isinstance(frames, tuple) else len(frames)
 
 
@@ -52,7 +82,7 @@ class Outbox:
 
     def __init__(self, max_bytes: int = 4 << 20, max_replies: int = 1000) -> None:
         self._replies: deque[Frames] = deque()
-        self._topics: dict[str, deque[tuple[int, Frames]]] = {}
+        self._topics: dict[str, deque[tuple[int, Entry]]] = {}
         self._sequence = itertools.count()
         self._max_bytes = max_bytes
         self._max_replies = max_replies
@@ -65,6 +95,8 @@ class Outbox:
         self.behind = False
         """Whether frames wait for the client's socket (the connection sets it): then a
         ``queue_length`` 0 topic keeps only its newest frame."""
+        self.encode_s = 0.0
+        """Time spent making ``Deferred`` frames since the connection last charged it (s)."""
 
     def __len__(self) -> int:
         return len(self._replies) + sum(len(queue) for queue in self._topics.values())
@@ -77,7 +109,7 @@ class Outbox:
         self._replies.append(frame)
         self._grow(_size(frame))
 
-    def put_topic(self, topic: str, frame: Frames, queue_length: int) -> None:
+    def put_topic(self, topic: str, frame: Entry, queue_length: int) -> None:
         """Queue a topic frame, keeping the newest ``queue_length`` for ``topic``.
 
         ``queue_length`` 0: every frame while the client keeps up, the newest one while it is
@@ -104,23 +136,40 @@ class Outbox:
         if queue:
             self.queued_bytes -= sum(_size(frame) for _, frame in queue)
 
+    def has_deferred(self) -> bool:
+        """Whether any frame waiting is still to be made (``Deferred``)."""
+        return any(isinstance(entry, Deferred)
+                   for queue in self._topics.values() for _, entry in queue)
+
+    def _made(self, entry: Entry) -> Frames:
+        """``entry``'s frames, made now if deferred (the time counted in ``encode_s``)."""
+        if not isinstance(entry, Deferred):
+            return entry
+        started = time.perf_counter()
+        frames = entry.make()
+        self.encode_s += time.perf_counter() - started
+        self.queued_bytes += _size(frames) - entry.size
+        return frames
+
     def pop(self) -> Frame | None:
         """The next frame to send: replies first, then topic frames oldest first.
 
         A fragmented message's frames come one per call, its rest left at the head.
         """
+        entry: Frames
         if self._replies:
             entry = self._replies.popleft()
             if isinstance(entry, tuple) and len(entry) > 1:
                 self._replies.appendleft(entry[1:])
         else:
-            oldest: deque[tuple[int, Frames]] | None = None
+            oldest: deque[tuple[int, Entry]] | None = None
             for queue in self._topics.values():
                 if queue and (oldest is None or queue[0][0] < oldest[0][0]):
                     oldest = queue
             if oldest is None:
                 return None
-            sequence, entry = oldest.popleft()
+            sequence, waiting = oldest.popleft()
+            entry = self._made(waiting)
             if isinstance(entry, tuple) and len(entry) > 1:
                 oldest.appendleft((sequence, entry[1:]))
         frame = entry[0] if isinstance(entry, tuple) else entry
@@ -143,7 +192,7 @@ class Outbox:
         topic_frames = [entry for queue in self._topics.values() for entry in queue]
         if topic_frames:
             topic_frames.sort(key=_sequence_of)
-            frames.extend(_flat([frame for _, frame in topic_frames]))
+            frames.extend(_flat([self._made(frame) for _, frame in topic_frames]))
             for queue in self._topics.values():
                 queue.clear()
         self.queued_bytes = 0

@@ -23,7 +23,7 @@ from rosbridge.core.encoding import to_json
 from rosbridge.core.errors import shorten
 from rosbridge.core.fragments import Reassembly, fragment
 from rosbridge.core.limits import ClientLimits, TokenBucket
-from rosbridge.core.outbox import Frames, Outbox
+from rosbridge.core.outbox import Entry, Outbox
 from rosbridge.core.schema import MAX_NAME_CHARS, STATUS_LEVELS, GoalStatus, echoable_id
 
 log = logging.getLogger("websim.bridge")
@@ -195,7 +195,7 @@ class Session:
             self.outbox.put_reply(text)
         self.ready[self] = None
 
-    def queue_topic(self, topic: str, frames: Frames, queue_length: int) -> None:
+    def queue_topic(self, topic: str, frames: Entry, queue_length: int) -> None:
         """Queue a message of ``topic`` (``Outbox.put_topic``: its newest ``queue_length``).
 
         ``frames`` carry the name the client knows the topic by (``namespace`` + ``topic``).

@@ -168,11 +168,16 @@ class BridgeConnection:
             return
         if self._backed_up.is_set() or self._connection.protocol.state is not State.OPEN:
             return
+        if self._handling.wait_s() > 0 and outbox.has_deferred():
+            outbox.behind = True  # its costly formats wait for its budget, in its writer
+            self._backed_up.set()
+            return
         transport = self._connection.transport
         room = WRITE_BUFFER_BYTES - transport.get_write_buffer_size()
         if room > 0:
             wire = self._wire.of
             chunks = [wire(frame) for frame in outbox.take(room)]
+            self._charge_encoding()
             if chunks:
                 data = b"".join(chunks) if len(chunks) > 1 else chunks[0]
                 self._handed_bytes += len(data)
@@ -193,7 +198,14 @@ class BridgeConnection:
                 await self._backed_up.wait()
                 watchdog = asyncio.create_task(self._watch())
                 try:
-                    while outbox.overflowed is None and (frame := outbox.pop()) is not None:
+                    while outbox.overflowed is None:
+                        wait_s = self._handling.wait_s()
+                        if wait_s > 0 and outbox.has_deferred():
+                            await asyncio.sleep(wait_s)  # only this client waits
+                        frame = outbox.pop()
+                        self._charge_encoding()
+                        if frame is None:
+                            break
                         self._handed_bytes += len(frame)
                         await self._connection.send(frame)  # waits while the socket is full
                 finally:
@@ -205,6 +217,18 @@ class BridgeConnection:
                 self._backed_up.clear()  # caught up: back to flushing after each tick
         except ConnectionClosed:
             pass
+
+    def _charge_encoding(self) -> None:
+        """Charge the client's handling budget with the costly formats made for it.
+
+        Its ``png``, ``cbor-raw`` and fragmented frames are made when they are written
+        (``outbox.Deferred``): the client that asked pays, in time it is then read and
+        written more slowly, never the tick nor the publisher.
+        """
+        outbox = self.session.outbox
+        if outbox.encode_s:
+            self._handling.charge(outbox.encode_s)
+            outbox.encode_s = 0.0
 
     async def _watch(self) -> None:
         """Close the client if it lets too much pile up, or its socket stops accepting.

@@ -11,16 +11,19 @@ type it cannot import.
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable, Collection, Iterator
+from dataclasses import dataclass
 from typing import Any
 
 from rosbridge.core.clock import WALL_CLOCK, Clock
 from rosbridge.core.context import BridgeContext
 from rosbridge.core.encoding import cbor_raw_frame, png_frame, to_cbor, to_json
-from rosbridge.core.errors import BridgeError
-from rosbridge.core.fragments import fragment
-from rosbridge.core.outbox import Frames
+from rosbridge.core.errors import BridgeError, shorten
+from rosbridge.core.faults import Faults
+from rosbridge.core.fragments import fragment, topic_fragment_size
+from rosbridge.core.outbox import Deferred, Frames
 from rosbridge.core.session import Session, Subscription
 from rosbridge.msgs import cdr, definitions
 from rosbridge.msgs.values import normalize_type
@@ -46,43 +49,170 @@ It raises one of ``Bridge.refusals`` to refuse the message; the reason goes back
 publisher."""
 
 
+MAX_VARIANTS = 4
+"""Costly forms of one message (``png``, ``cbor-raw``, fragmented JSON, each per namespace
+and fragment size) kept for reuse by every subscriber that asks for the same; a form past
+it is made for each subscriber that asks, at that subscriber's cost."""
+
+VARIANT_BYTES_FACTOR = 4
+"""The costly forms one message keeps together hold at most this many times its JSON
+text's length (plus its JSON and CBOR): a latched message holds at most about six times its
+size, whatever its subscribers ask for."""
+
+
+MAX_LATCHED_BYTES_PER_ROBOT = 1 << 20
+"""What clients' latched messages on one robot may hold together (bytes as they arrived,
+each at most ``ClientLimits.max_latched_bytes``; their encodings hold at most about six
+times as much, ``VARIANT_BYTES_FACTOR``): 16 messages of the largest size. A server holds
+at most this times its robots; the robot's own latched topics are not counted (they are
+its fixed few)."""
+
+
+@dataclass
+class _Latched:
+    """A topic's latched message and whose it is.
+
+    Attributes:
+        encoded: the message, with its encodings.
+        owner: the client that published it, None for an in-process endpoint's (the
+            robot's, the ROS graph's): it goes when its owner leaves or unadvertises.
+        size: what it counts against ``MAX_LATCHED_BYTES_PER_ROBOT`` (0 for in-process).
+    """
+
+    encoded: Encoded
+    owner: Session | None
+    size: int = 0
+
+
 class Encoded:
     """One publish envelope, encoded at most once per format whatever the subscriber count.
 
     A format is a compression (``schema.COMPRESSIONS``), for the JSON ones (``none``,
-    ``png``) a ``fragment_size`` (a longer text goes as its ``fragment`` frames), and a
+    ``png``) a ``fragment_size`` (a longer text goes as its ``fragment`` frames; the size is
+    ``fragments.topic_fragment_size``: a power of two, so a message has few forms), and a
     namespace that prefixes the topic's name in the envelope (``Session.namespace``).
+
+    JSON and CBOR, cheap and shared, are made on the tick (``frame``); the costly forms
+    (``png``, ``cbor-raw``, fragments) are ``Deferred``: made when the subscriber's frames
+    are written, charged to it, and kept for the next subscriber that asks for the same
+    (at most ``MAX_VARIANTS``, ``VARIANT_BYTES_FACTOR`` times the JSON text).
 
     Args:
         topic: the topic it is published on.
         msg: the message (canonical form).
         clock: what stamps its ``cbor-raw`` frame (``stamp_s``; default: wall time).
+        faults: where a form that fails to be made is recorded (default: nowhere).
     """
 
-    def __init__(self, topic: str, msg: Any, clock: Clock = WALL_CLOCK) -> None:
+    def __init__(self, topic: str, msg: Any, clock: Clock = WALL_CLOCK,
+                 faults: Faults | None = None) -> None:
         self.topic = topic
         self._clock = clock
+        self._faults = faults
         self.envelope = {"op": "publish", "topic": topic, "msg": msg}
         self._json: str | None = None
-        self._frames: dict[tuple[str, int | None, str], Frames] = {}
+        self._frames: dict[tuple[str, str], Frames] = {}
+        self._variants: dict[tuple[str, int | None, str], Frames] = {}
+        self._variant_bytes = 0
+        self._failed: dict[str, str] = {}
+        """Formats this message cannot be written in, and why (each is tried once)."""
+        self._reported: set[str] = set()
+
+    def report_failure(self, compression: str) -> bool:
+        """Whether a failure to write it as ``compression`` is to be recorded (once)."""
+        if compression in self._reported:
+            return False
+        self._reported.add(compression)
+        return True
+
+    @property
+    def json(self) -> str:
+        """The envelope's JSON text (made once)."""
+        if self._json is None:
+            self._json = to_json(self.envelope)
+        return self._json
+
+    @property
+    def held_bytes(self) -> int:
+        """What its encodings hold (characters of text, bytes of binary frames)."""
+        return (len(self._json or "") + sum(_size(frames) for frames in self._frames.values())
+                + self._variant_bytes)
 
     def frame(self, compression: str, fragment_size: int | None = None,
               type_name: str | None = None, namespace: str = "") -> Frames:
         """The frames for subscribers that asked for ``compression`` and ``fragment_size``.
 
+        ``fragment_size``: the client's; it is rounded (``topic_fragment_size``).
         ``type_name``: the topic's type, for ``cbor-raw``; a message that cannot be
         serialized gets an error ``status`` frame in its place. ``namespace``: the prefix
-        of the topic's name for the subscriber (``Session.namespace``).
+        of the topic's name for the subscriber (``Session.namespace``). Made now, even a
+        costly format (``entry`` defers those).
 
         Raises:
-            ValueError: the message cannot be written in this format at all.
+            ValueError: the message cannot be written in this format at all (JSON, CBOR).
         """
-        binary = compression in ("cbor", "cbor-raw")
-        key = (compression, None if binary else fragment_size, namespace)
+        entry = self.entry(compression, fragment_size, type_name, namespace)
+        return entry.make() if isinstance(entry, Deferred) else entry
+
+    def entry(self, compression: str, fragment_size: int | None = None,
+              type_name: str | None = None, namespace: str = "") -> Frames | Deferred:
+        """As ``frame``, but a costly format comes back ``Deferred``: made when written.
+
+        Raises:
+            ValueError: the message cannot be written in this format at all (JSON, CBOR).
+        """
+        if compression == "cbor":
+            return self._cheap("cbor", namespace)
+        size = topic_fragment_size(fragment_size)
+        if compression == "none" and (size is None or len(self.json) <= size):
+            return self._cheap("none", namespace)
+        key = (compression, None if compression == "cbor-raw" else size, namespace)
+        made = self._variants.get(key)
+        if made is not None:
+            return made
+        return Deferred(functools.partial(self._variant, key, type_name), len(self.json))
+
+    def _cheap(self, compression: str, namespace: str) -> Frames:
+        """JSON or CBOR, made once; raises (ValueError) if it cannot be, once and again."""
+        key = (compression, namespace)
         frames = self._frames.get(key)
-        if frames is None:
-            frames = self._frames[key] = self._encode(compression, fragment_size, type_name,
-                                                      namespace)
+        if frames is not None:
+            return frames
+        failed = self._failed.get(compression)
+        if failed is not None:
+            raise ValueError(failed)  # recorded the first time, not again
+        try:
+            if namespace:  # the same message under the name the subscriber knows it by
+                named = Encoded(namespace + self.topic, self.envelope["msg"], self._clock)
+                frames = named._cheap(compression, "")
+            else:
+                frames = to_cbor(self.envelope) if compression == "cbor" else self.json
+        except (TypeError, ValueError) as error:
+            self._failed[compression] = f"{type(error).__name__}: {error}"
+            raise
+        self._frames[key] = frames
+        return frames
+
+    def _variant(self, key: tuple[str, int | None, str], type_name: str | None) -> Frames:
+        """A costly form, made for the subscriber being written (kept if there is room)."""
+        made = self._variants.get(key)
+        if made is not None:
+            return made
+        compression, size, namespace = key
+        try:
+            frames = self._encode(compression, size, type_name, namespace)
+        except Exception as error:  # one subscriber's format is not the others'
+            if self._faults is not None and compression not in self._failed:
+                self._faults.record(f"encoding {self.topic} as {compression}", error)
+            self._failed[compression] = str(error)
+            return to_json({"op": "status", "level": "error",
+                            "msg": shorten(f"{compression}: a message on {self.topic} "
+                                           f"cannot be sent so: {error}")})
+        size_bytes = _size(frames)
+        if len(self._variants) < MAX_VARIANTS and self._variant_bytes + size_bytes <= \
+                VARIANT_BYTES_FACTOR * len(self.json):
+            self._variants[key] = frames
+            self._variant_bytes += size_bytes
         return frames
 
     def _encode(self, compression: str, fragment_size: int | None,
@@ -94,9 +224,7 @@ class Encoded:
             return to_cbor(self.envelope)
         if compression == "cbor-raw":
             return self._cbor_raw(type_name)
-        if self._json is None:
-            self._json = to_json(self.envelope)
-        text = png_frame(self._json) if compression == "png" else self._json
+        text = png_frame(self.json) if compression == "png" else self.json
         if fragment_size is not None and len(text) > fragment_size:
             return fragment(text, fragment_size)
         return text
@@ -111,6 +239,10 @@ class Encoded:
                             "msg": f"cbor-raw: a message on {self.topic} cannot be sent as "
                                    f"CDR: {error}"})
         return cbor_raw_frame(self.topic, data, self._clock.stamp_s())
+
+
+def _size(frames: Frames) -> int:
+    return sum(map(len, frames)) if isinstance(frames, tuple) else len(frames)
 
 
 class Topics:
@@ -129,7 +261,12 @@ class Topics:
         self._owned: set[str] = set()
         self._subscribers: dict[str, set[Session]] = {}
         self._local: dict[str, list[LocalSubscriber]] = {}
-        self._latched: dict[str, Encoded] = {}
+        self._latched: dict[str, _Latched] = {}
+        """Each latched topic's newest latched message (rosbridge gives it to every new
+        subscriber), owned by its publisher: dropped when that client leaves or
+        unadvertises the topic, as rosbridge drops a publisher's latched message with it."""
+        self.latched_bytes = 0
+        """Bytes of clients' latched messages held (``MAX_LATCHED_BYTES_PER_ROBOT``)."""
         self._subscribed_types: dict[str, str] = {}
         """Types named by subscriptions to topics of no other known type (rosbridge infers
         a publisher's type from them); dropped with the last subscriber."""
@@ -159,10 +296,28 @@ class Topics:
 
     def publish(self, topic: str, msg: Any, latch: bool = False) -> None:
         """Queue an in-process message (the robot's, the ROS graph's) for ``topic``'s clients."""
-        encoded = Encoded(topic, msg, self._context.clock)
+        encoded = Encoded(topic, msg, self._context.clock, self._context.faults)
         if latch:
-            self._latched[topic] = encoded
+            self._latch(topic, _Latched(encoded, None))
         _run(self._deliver([encoded]))
+
+    def _latch(self, topic: str, latched: _Latched) -> None:
+        """Make ``latched`` ``topic``'s latched message, in place of any before it."""
+        self._unlatch(topic)
+        self._latched[topic] = latched
+        self.latched_bytes += latched.size
+
+    def _unlatch(self, topic: str, owner: Session | None = None) -> None:
+        """Drop ``topic``'s latched message (only if ``owner``'s, when one is given)."""
+        latched = self._latched.get(topic)
+        if latched is None or (owner is not None and latched.owner is not owner):
+            return
+        del self._latched[topic]
+        self.latched_bytes -= latched.size
+
+    def latched_topics(self) -> dict[str, int]:
+        """Each latched topic and the bytes it counts (in-process ones: 0)."""
+        return {topic: latched.size for topic, latched in self._latched.items()}
 
     def publish_many(self, messages: list[tuple[str, Any]],
                      tick_s: float | None = None) -> Iterator[None]:
@@ -174,7 +329,7 @@ class Topics:
         (monotonic s), the time throttles measure against, so a tick that runs late does not
         make a throttled client miss its message.
         """
-        return self._deliver([Encoded(topic, msg, self._context.clock)
+        return self._deliver([Encoded(topic, msg, self._context.clock, self._context.faults)
                               for topic, msg in messages], tick_s)
 
     def has_subscribers(self, topic: str) -> bool:
@@ -206,6 +361,9 @@ class Topics:
             self._drop_subscription(session, topic)
         for topic in list(session.advertised):
             self._drop_advertisement(session, topic)
+        for topic in [topic for topic, latched in self._latched.items()
+                      if latched.owner is session]:  # latched without advertise, too
+            self._unlatch(topic, session)
         self._published_s.pop(session, None)
 
     # ---- advertise ------------------------------------------------------------------------
@@ -253,11 +411,12 @@ class Topics:
         if session.advertised.pop(topic, None) is None:
             return
         self._latching.discard((session, topic))
+        self._unlatch(topic, session)  # its latched message goes with its publisher
         still_used = topic in self._owned or topic in self._local or any(
             topic in other.advertised for other in self._context.sessions)
         if not still_used:
             self._types.pop(topic, None)
-            self._latched.pop(topic, None)
+            self._unlatch(topic)
         if not any(topic in other.advertised for other in self._context.sessions):
             self._context.graph.unadvertise(topic)
 
@@ -281,6 +440,13 @@ class Topics:
         if latch and size > session.limits.max_latched_bytes:
             raise BridgeError(f"publish to {topic}: a latched message may be at most "
                               f"{session.limits.max_latched_bytes} bytes, this one is {size}")
+        if latch:
+            held = self.latched_bytes - self._latched_size(topic)
+            if held + size > MAX_LATCHED_BYTES_PER_ROBOT:
+                raise BridgeError(f"publish to {topic}: this robot's latched messages hold "
+                                  f"{held} bytes; with this one they would exceed "
+                                  f"{MAX_LATCHED_BYTES_PER_ROBOT}; message dropped (publish "
+                                  "it without latch, or unadvertise a latched topic)")
         if not session.relay_budget.take(size):
             raise BridgeError(f"publish to {topic}: more than "
                               f"{session.limits.relay_bytes_per_s} bytes/s published; "
@@ -291,11 +457,15 @@ class Topics:
             except self._context.refusals as error:
                 raise BridgeError(f"{topic}: {error}") from None
         self._published_s[session] = self._context.clock.monotonic_s()
-        encoded = Encoded(topic, msg, self._context.clock)
+        encoded = Encoded(topic, msg, self._context.clock, self._context.faults)
         if latch:
-            self._latched[topic] = encoded
+            self._latch(topic, _Latched(encoded, session, size))
         _run(self._deliver([encoded]))
         self._context.graph.publish(session, topic, type_name, msg)
+
+    def _latched_size(self, topic: str) -> int:
+        latched = self._latched.get(topic)
+        return 0 if latched is None else latched.size
 
     def _inferred_type(self, topic: str) -> str | None:
         """A publish without advertise: the type ``topic`` is known to carry (rosbridge).
@@ -326,48 +496,46 @@ class Topics:
         if not audiences:
             return
         closing_loops = self._closing_loops(now)
-        unencodable: set[str] = set()
         for session in closing_loops:
             subscribed = False
             for encoded, subscribers in audiences:
-                if session in subscribers and encoded.topic not in unencodable:
+                if session in subscribers:
                     subscribed = True
-                    if not self._queue(session, encoded, now):
-                        unencodable.add(encoded.topic)
+                    self._queue(session, encoded, now)
             if subscribed:
                 self._context.closing[session] = None
         if self._context.closing:
             yield
         for encoded, subscribers in audiences:
-            if encoded.topic in unencodable:
-                continue
             for session in subscribers:
-                if session not in closing_loops and not self._queue(session, encoded, now):
-                    break
+                if session not in closing_loops:
+                    self._queue(session, encoded, now)
 
-    def _queue(self, session: Session, encoded: Encoded, now: float) -> bool:
+    def _queue(self, session: Session, encoded: Encoded, now: float) -> None:
         """Queue ``encoded`` for ``session`` unless its throttle holds it back.
 
-        False: the message cannot be encoded at all (recorded; nobody gets it).
+        A message that cannot be written in the client's format is recorded once (a fault)
+        and skipped for the clients of that format only: one subscriber's failure never
+        skips the others.
         """
         topic = encoded.topic
         subscription = session.subscriptions[topic]
         throttle_ms = subscription.throttle_in_force_ms
         if throttle_ms > 0 and now - subscription.last_sent_s < \
                 throttle_ms / 1000.0 - THROTTLE_JITTER_S:
-            return True
+            return
         subscription.last_sent_s = now
         try:
-            frame = encoded.frame(subscription.compression, session.fragment_size,
+            frame = encoded.entry(subscription.compression, session.fragment_size,
                                   self._type_of(topic), session.namespace)
         except (TypeError, ValueError) as error:  # a message no encoder can write
-            self._context.faults.record(f"encoding {topic}", error)
-            return False
+            if encoded.report_failure(subscription.compression):
+                self._context.faults.record(f"encoding {topic}", error)
+            return
         try:
             session.queue_topic(topic, frame, subscription.queue_in_force)
         except Exception as error:  # one client's fault is not the others'
             self._context.faults.record(f"delivering {topic}", error)
-        return True
 
     def _closing_loops(self, now: float) -> dict[Session, None]:
         """The clients that published within ``CLOSING_LOOP_S``, in order."""
@@ -414,8 +582,13 @@ class Topics:
         latched = self._latched.get(topic)
         if latched is not None:
             _, length = subscription.effective()
-            frames = latched.frame(subscription.compression, session.fragment_size,
-                                   self._type_of(topic), session.namespace)
+            try:
+                frames = latched.encoded.entry(subscription.compression,
+                                               session.fragment_size, self._type_of(topic),
+                                               session.namespace)
+            except (TypeError, ValueError) as error:
+                raise BridgeError(f"subscribe {topic}: its latched message cannot be sent as "
+                                  f"{subscription.compression}: {error}") from None
             session.queue_topic(topic, frames, length)
 
     def _check_cdr(self, topic: str) -> None:
