@@ -106,3 +106,38 @@ def test_phone_shows_the_joystick_and_dragging_it_drives(server: ServerProcess,
     assert speed_of(moving) > 0.1  # forward, at the joystick's deflection
     assert abs(yaw_of(stopped)) < 0.05  # straight up: hardly any turning
     assert x_of(stopped) > 0.05
+
+
+@needs_browser
+def test_space_stops_and_never_presses_the_focused_button(server: ServerProcess, bridge: Bridge,
+                                                          browser: Any) -> None:
+    """Space is the page's stop key: after the PID's Start and Stop (the button keeps the
+    focus) it stops, and does not press Start again; it stops a running PID too. Typed into a
+    text field, a space stays text."""
+    with driving_page(browser, bridge, page_url(server),
+                      viewport={"width": 1280, "height": 800}) as (page, log):
+        page.fill("#pid-setpoint", "45")
+        page.click("#pid-toggle")
+        page.wait_for_selector("#pid-toggle[aria-pressed=true]")
+        page.click("#pid-toggle")
+        page.wait_for_selector("#pid-toggle[aria-pressed=false]")
+        assert page.evaluate("document.activeElement.id") == "pid-toggle"
+        wait_until_still(bridge)
+        commands_before = len(bridge.messages("/cmd_vel"))
+        page.keyboard.press(" ")
+        time.sleep(1.0)  # a restarted PID would have published ~10 commands by now
+        assert page.get_attribute("#pid-toggle", "aria-pressed") == "false"
+        after = twist_pairs(bridge.messages("/cmd_vel")[commands_before:])
+        assert after == [(0.0, 0.0)] * len(after) and len(after) <= 1, after
+
+        page.click("#pid-toggle")  # running, and Space (the button focused) stops it
+        page.wait_for_selector("#pid-toggle[aria-pressed=true]")
+        page.keyboard.press(" ")
+        page.wait_for_selector("#pid-toggle[aria-pressed=false]", timeout=2000)
+        wait_until_still(bridge)
+        assert twist_pairs(bridge.messages("/cmd_vel"))[-1] == (0.0, 0.0)
+
+        page.fill("#ws-url", "")
+        page.type("#ws-url", "ws://a b")  # keys typed into a text field stay text
+        assert page.input_value("#ws-url") == "ws://a b"
+        assert log.page_errors == []

@@ -44,6 +44,10 @@ PNG_PADDING = b"\n"
 
 _NON_ASCII = re.compile(r"[^\x00-\x7f]")
 
+_SURROGATE_ESCAPE = re.compile(r"\\u[dD][89a-fA-F]")
+"""A JSON escape of a UTF-16 surrogate: only these make text that UTF-8 cannot hold (a
+lone one); a pair decodes to one character."""
+
 
 def _null_non_finite(value: Any) -> Any:
     if isinstance(value, float):
@@ -177,13 +181,16 @@ def structure(data: bytes) -> tuple[int, int]:
 def parse_json(text: str | bytes) -> Any:
     """Decode an incoming JSON frame, refusing costly shapes before parsing them.
 
+    A string escaping a lone UTF-16 surrogate (backslash-u D800 to DFFF, unpaired) is
+    refused: no encoder (UTF-8, CBOR, CDR) could write it to another client.
+
     ``NaN`` and ``Infinity`` literals decode to float nan and inf and are refused where a
     finite number is needed (a Twist), instead of failing the whole frame. Integers keep
     every digit (the schema refuses those out of range).
 
     Raises:
-        ValueError: invalid JSON, nested more than ``MAX_NESTING`` levels deep, or more
-            than ``MAX_ELEMENTS`` elements.
+        ValueError: invalid JSON, nested more than ``MAX_NESTING`` levels deep, more
+            than ``MAX_ELEMENTS`` elements, or a lone surrogate in a string.
     """
     if isinstance(text, str):
         brackets, commas = text.count("[") + text.count("{"), text.count(",")
@@ -199,4 +206,27 @@ def parse_json(text: str | bytes) -> Any:
         if elements > MAX_ELEMENTS:
             raise ValueError(f"too many elements ({elements}; at most {MAX_ELEMENTS} "
                              "values, objects and arrays)")
-    return json.loads(text)
+    message = json.loads(text)
+    probe = text if isinstance(text, str) else text.decode("utf-8", "replace")
+    if _SURROGATE_ESCAPE.search(probe):
+        _refuse_lone_surrogates(message)
+    return message
+
+
+def _refuse_lone_surrogates(value: Any) -> None:
+    """Raise ValueError if a string (or key) of ``value`` holds a lone surrogate."""
+    stack = [value]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, str):
+            try:
+                item.encode("utf-8")
+            except UnicodeEncodeError as error:
+                raise ValueError(f"a string holds a lone UTF-16 surrogate "
+                                 f"(\\u{ord(item[error.start]):04x}): text that UTF-8, CBOR "
+                                 "and ROS cannot carry") from None
+        elif isinstance(item, dict):
+            stack.extend(item.keys())
+            stack.extend(item.values())
+        elif isinstance(item, list):
+            stack.extend(item)

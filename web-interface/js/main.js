@@ -35,6 +35,7 @@ async function main() {
     error: $('#pid-error'), output: $('#pid-output'),
   }, () => limits.angular);
   teleop.addEventListener('drive', () => pid.stop()); // the student takes over
+  teleop.addEventListener('halt', () => pid.stop()); // Space or Stop: nothing drives on
   pid.addEventListener('start', () => teleop.stop());
   closeWithPage(connection);
   keepBridgeOnNavigation();

@@ -35,6 +35,11 @@ export function keysBelongToElement(element) {
     && !['button', 'submit', 'reset', 'checkbox', 'radio'].includes(element.type);
 }
 
+/** Inputs where a space is typed: Space stops the robot everywhere else (a slider too). */
+export function spaceBelongsToElement(element) {
+  return keysBelongToElement(element) && !(element.tagName === 'INPUT' && element.type === 'range');
+}
+
 /** The [linear, angular] demand of held keys (a Set of event.key values), each in [-1, 1]. */
 export function keyDemand(heldKeys) {
   let linear = 0;
@@ -50,8 +55,9 @@ export function keyDemand(heldKeys) {
 }
 
 /**
- * The velocity-command side of teleoperation. Events: 'drive' when driving starts (the PID
- * panel stops then), 'command' with detail {linear, angular} on every publish.
+ * The velocity-command side of teleoperation. Events: 'drive' when driving starts and 'halt'
+ * when the user stops (Space, the Stop button): the PID panel stops then; 'command' with
+ * detail {linear, angular} on every publish.
  * @param {object} robot the robot description (robot.js): its cmd_vel topic and limits
  */
 export class Teleop extends EventTarget {
@@ -94,10 +100,16 @@ export class Teleop extends EventTarget {
     }
   }
 
-  /** Releases every source and sends a zero Twist (Space, blur, hidden tab, disconnect). */
+  /** Releases every source and sends a zero Twist (blur, hidden tab, disconnect). */
   stop() {
     this._clear();
     this._send(0, 0);
+  }
+
+  /** The user's stop (Space, the Stop button): stop() and a 'halt' for whatever else drives. */
+  halt() {
+    this.stop();
+    this.dispatchEvent(new Event('halt'));
   }
 
   /** The command (m/s, rad/s) the held sources ask for now. */
@@ -130,31 +142,38 @@ export class Teleop extends EventTarget {
   }
 }
 
-/** Arrow keys and WASD drive while held, Space stops; not while a text field has focus. */
+/**
+ * Arrow keys and WASD drive while held, Space stops; not while a text field has focus. The
+ * keys the page uses never act on a focused control as well: Space on the PID's Stop button
+ * would otherwise press it again and restart the PID (Enter still presses a button).
+ */
 export function bindKeys(teleop, target = window) {
   const held = new Set();
   const update = () => {
     const [linear, angular] = keyDemand(held);
     teleop.set('keys', linear, angular);
   };
-  target.addEventListener('keydown', (event) => {
-    if (event.ctrlKey || event.metaKey || event.altKey) return;
-    if (keysBelongToElement(event.target)) return;
+  const pageKey = (event) => {
+    if (event.ctrlKey || event.metaKey || event.altKey) return null;
     const key = event.key.length === 1 ? event.key.toLowerCase() : event.key;
+    if (key === ' ') return spaceBelongsToElement(event.target) ? null : key;
+    return key in KEY_DEMANDS && !keysBelongToElement(event.target) ? key : null;
+  };
+  target.addEventListener('keydown', (event) => {
+    const key = pageKey(event);
+    if (key === null) return;
+    event.preventDefault(); // no scrolling, no pressing or toggling the focused control
     if (key === ' ') {
-      // Space stops; on a focused button it also presses it (keyboard users need that),
-      // elsewhere it must not scroll the page.
-      if (event.target.tagName !== 'BUTTON') event.preventDefault();
       held.clear();
-      teleop.stop();
-    } else if (key in KEY_DEMANDS) {
-      event.preventDefault(); // no page scrolling while driving
+      teleop.halt();
+    } else {
       held.add(key);
       update();
     }
   });
   target.addEventListener('keyup', (event) => {
     const key = event.key.length === 1 ? event.key.toLowerCase() : event.key;
+    if (pageKey(event) !== null) event.preventDefault(); // a button clicks on Space's keyup
     if (held.delete(key)) update();
   });
   const stopAll = () => {
@@ -173,7 +192,7 @@ export function bindButtons(teleop, root) {
   for (const button of root.querySelectorAll('[data-drive]')) {
     const name = button.dataset.drive;
     if (name === 'stop') {
-      button.addEventListener('click', () => teleop.stop());
+      button.addEventListener('click', () => teleop.halt());
       continue;
     }
     const source = `button:${name}`;
