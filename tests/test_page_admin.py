@@ -173,3 +173,52 @@ def test_admin_sends_no_token_to_a_bridge_named_by_a_link(server: ServerProcess,
     assert len(paths) >= 3
     assert [path for path in paths if "token=" in path] == []
     assert [url for url in log.requests if url.startswith(other_url) and "token=" in url] == []
+
+
+@needs_browser
+def test_admin_sends_the_valid_changes_and_says_what_it_refused(server: ServerProcess,
+                                                                bridge: Bridge,
+                                                                browser: Any) -> None:
+    """An out-of-range value replaces the last 'Applied' with the refusal, and a mode change
+    in the same form is still sent."""
+    mass = next(s for s in runtime_parameters() if s["name"] == "mass_kg")
+    context = admin_context(browser, server, viewport={"width": 1280, "height": 800})
+    try:
+        page, log = open_page(context, f"{server.http_url}/admin?token={ADMIN_TOKEN}")
+        wait_connected(page)
+        page.wait_for_selector("#params-form[data-loaded]")
+        page.fill("#param-mass_kg", "2.5")
+        page.click("#params-apply")
+        page.wait_for_selector('#params-notice[data-kind="ok"]', timeout=10000)
+        too_heavy = mass["maximum"] * 10
+        page.fill("#param-mass_kg", f"{too_heavy:g}")
+        page.select_option("#param-mode", "dynamic")
+        page.click("#params-apply")
+        wait_for(lambda: bridge.parameter("mode") == "dynamic", what="the mode change sent")
+        notice = page.wait_for_selector('#params-notice:not([data-kind="ok"])', timeout=10000)
+        page.wait_for_function(
+            "document.querySelector('#params-notice').textContent.includes('mode = dynamic')",
+            timeout=10000)
+        text = notice.text_content() or ""
+        assert "mode = dynamic" in text and "mass_kg" in text and "not sent" in text.lower(), text
+        assert f"{mass['maximum']:g}" in text, text  # the limit it broke
+        assert page.input_value("#param-mass_kg") == f"{too_heavy:g}"  # kept, to correct
+        assert page.get_attribute("#param-mass_kg", "aria-invalid") == "true"
+        assert bridge.parameter("mass_kg") == 2.5
+        screenshot(page, "admin-partly-refused.png", full_page=False)
+        page.fill("#param-mass_kg", "")  # nothing valid to send: it says so
+        page.click("#params-apply")
+        page.wait_for_function(
+            "document.querySelector('#params-notice').textContent.startsWith('Nothing sent')",
+            timeout=10000)
+        assert page.get_attribute("#params-notice", "data-kind") == "error"
+        page.fill("#param-mass_kg", "1.2")
+        page.select_option("#param-mode", "kinematic")
+        page.click("#params-apply")
+        page.wait_for_selector('#params-notice[data-kind="ok"]', timeout=10000)
+        assert page.get_attribute("#param-mass_kg", "aria-invalid") != "true"
+        assert log.page_errors == []
+    finally:
+        context.close()
+    assert bridge.parameter("mass_kg") == 1.2
+    assert bridge.parameter("mode") == "kinematic"

@@ -2,7 +2,9 @@
 // runtime entries of robot.json's parameters[]): each field gets its parameter's type, unit,
 // range and choices, so the browser refuses an out-of-range value before anything is sent.
 // It reads the robot's values with get_parameters and sends the changed ones with
-// set_parameters (params.js); reset calls the robot's reset service.
+// set_parameters (params.js); reset calls the robot's reset service. A field the robot would
+// refuse (out of range, empty) is not sent, and the notice says so; the valid changes of the
+// same form are sent all the same.
 
 import { ServiceCallError } from './connection.js';
 import { getParameters, setParameters } from './params.js';
@@ -10,8 +12,9 @@ import { runtimeParameters } from './robot.js';
 
 /**
  * A form field for `spec` (a parameters[] entry), with `types` robot.json's parameter_types:
- * {name, row (the element to insert), input, read() -> value, write(value)}. A choice list
- * becomes a select, a number an <input type=number> with min and max, a boolean a checkbox.
+ * {name, row (the element to insert), input, read() -> value, write(value), problem() -> why
+ * the value cannot be sent, or null}. A choice list becomes a select, a number an
+ * <input type=number> with min and max, a boolean a checkbox.
  */
 export function parameterField(document, spec, types) {
   const row = document.createElement('div');
@@ -49,11 +52,26 @@ export function parameterField(document, spec, types) {
   hint.textContent = [spec.description, rangeText(spec)].filter(Boolean).join(' · ');
   row.append(label, input, hint);
   const isBool = input.type === 'checkbox';
+  const unit = spec.unit ? ` ${spec.unit}` : '';
   return {
     name: spec.name,
     row,
     input,
     numeric,
+    problem: () => {
+      const { validity } = input;
+      if (validity.valid) return null;
+      if (validity.badInput) return `${spec.name}: "${input.value}" is not a number`;
+      if (validity.valueMissing) return `${spec.name} is empty`;
+      if (validity.rangeOverflow) {
+        return `${spec.name} = ${input.value} is above its maximum, ${spec.maximum}${unit}`;
+      }
+      if (validity.rangeUnderflow) {
+        return `${spec.name} = ${input.value} is below its minimum, ${spec.minimum}${unit}`;
+      }
+      if (validity.stepMismatch) return `${spec.name} = ${input.value} is not a whole number`;
+      return `${spec.name}: ${input.validationMessage}`;
+    },
     read: () => {
       if (isBool) return input.checked;
       return numeric ? Number(input.value) : input.value;
@@ -100,8 +118,10 @@ export class ParametersPanel extends EventTarget {
       .map((spec) => parameterField(document, spec, robot.parameter_types));
     elements.fields.replaceChildren(...this.fields.map((field) => field.row));
     this.loaded = {}; // the values last read from the robot
+    // The form checks its fields itself (apply): an invalid one must not hold back the rest.
+    this.form.noValidate = true;
     this.form.addEventListener('submit', (event) => {
-      event.preventDefault(); // the browser submits only a valid form: every value in range
+      event.preventDefault();
       this.apply();
     });
     elements.reload.addEventListener('click', () => this.load());
@@ -109,7 +129,8 @@ export class ParametersPanel extends EventTarget {
     connection.addEventListener('connected', () => this.load());
   }
 
-  async load() {
+  /** Reads the robot's values into the fields, except those in `keep` (refused values). */
+  async load(keep = new Set()) {
     try {
       const values = await getParameters(this.connection, this.robot,
         this.fields.map((field) => field.name));
@@ -117,7 +138,9 @@ export class ParametersPanel extends EventTarget {
       for (const field of this.fields) {
         const value = values[field.name];
         field.input.disabled = value === undefined; // a robot without that parameter
+        if (keep.has(field)) continue; // the user's refused value stays, to be corrected
         field.write(value);
+        field.input.removeAttribute('aria-invalid');
       }
       this.form.dataset.loaded = 'true';
     } catch (error) {
@@ -125,42 +148,56 @@ export class ParametersPanel extends EventTarget {
     }
   }
 
-  /** Sends the fields that differ from the robot's values, then shows what it said. */
+  /**
+   * Sends the valid fields that differ from the robot's values, then shows what the robot
+   * said and which fields were not sent, and why (out of range, empty, not a number).
+   */
   async apply() {
-    if (!this.form.reportValidity()) return; // out of range, empty: the browser says which
     const changes = {};
+    const invalid = [];
     for (const field of this.fields) {
       if (field.input.disabled) continue;
-      const value = field.read();
-      if (field.numeric && !Number.isFinite(value)) {
-        this.say('error', `${field.name}: "${field.input.value}" is not a number`);
-        field.input.focus();
-        return;
+      const problem = field.problem() ?? (field.numeric && !Number.isFinite(field.read())
+        ? `${field.name}: "${field.input.value}" is not a number` : null);
+      field.input.setAttribute('aria-invalid', String(problem !== null));
+      if (problem !== null) {
+        invalid.push({ field, problem });
+        continue;
       }
+      const value = field.read();
       if (value !== this.loaded[field.name]) changes[field.name] = value;
     }
+    const notSent = invalid.length
+      ? `Not sent: ${invalid.map(({ problem }) => problem).join('; ')}.` : '';
+    if (invalid.length) invalid[0].field.input.focus();
     if (!Object.keys(changes).length) {
-      this.say('info', 'Nothing to apply: every field shows the robot\'s current value.');
+      if (notSent) this.say('error', `Nothing sent. ${notSent}`);
+      else this.say('info', 'Nothing to apply: every field shows the robot\'s current value.');
       return;
     }
+    this.say('info', 'Applying…'); // the last result must not stand for this one
+    let kind = 'ok';
+    let said;
     try {
       const results = await setParameters(this.connection, this.robot, changes);
       const refused = results.filter((r) => !r.successful);
-      if (refused.length) {
-        this.say('error', refused.map((r) => `${r.name} refused: ${r.reason}`).join('; '));
-      } else {
-        const applied = Object.entries(changes).map(([n, v]) => `${n} = ${v}`);
-        this.say('ok', `Applied: ${applied.join(', ')}`);
-      }
+      const applied = Object.entries(changes)
+        .filter(([n]) => !refused.some((r) => r.name === n)).map(([n, v]) => `${n} = ${v}`);
+      said = [applied.length ? `Applied: ${applied.join(', ')}.` : '',
+        refused.map((r) => `${r.name} refused: ${r.reason}`).join('; ')].filter(Boolean);
+      if (refused.length) kind = applied.length ? 'warn' : 'error';
     } catch (error) {
+      kind = 'error';
       if (error instanceof ServiceCallError) {
-        this.say('error', `Refused: ${error.message}`);
+        said = [`Refused: ${error.message}`];
         this.dispatchEvent(new Event('refused'));
       } else {
-        this.say('error', `Not applied: ${error.message}`);
+        said = [`Not applied: ${error.message}`];
       }
     }
-    await this.load();
+    if (notSent && kind === 'ok') kind = 'warn';
+    this.say(kind, [...said, notSent].filter(Boolean).join(' '));
+    await this.load(new Set(invalid.map(({ field }) => field)));
   }
 
   async reset() {
