@@ -21,10 +21,15 @@ from typing import Any
 
 from physics import TICK_PERIOD_S, ConfigError
 from ros_nodes.robot_endpoint import RobotEndpoint
-from ros_nodes.robot_interface import RESERVED_NAMESPACES
+from ros_nodes.robot_interface import (
+    RESERVED_NAMESPACES,
+    RESET_SERVICE,
+    ROBOT_TOPICS,
+)
 from ros_nodes.robot_services import require_admin
 from ros_nodes.sensors import Sensor
 from ros_nodes.virtual_robot_core import VirtualRobot
+from rosbridge.core.access import DriveRules
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.errors import ServiceError
 from rosbridge.core.faults import Faults
@@ -44,6 +49,20 @@ payload and whether it is paused (the instructor's dashboard polls it)."""
 
 PAUSE_SERVICE = "/websim/pause"
 """Admin only: ``{paused: true}`` holds the robot, ``{paused: false}`` lets it run."""
+
+TOKEN_SERVICE = "/websim/token"
+"""``websim/srv/RobotToken`` ``{}`` -> ``{token}``: a class robot's own token, for a client that
+holds it already or the instructor's token (an open class hands it to the student who
+enrolled the name: the page keeps it)."""
+
+DRIVE_RULES = DriveRules(
+    topics=frozenset(spec.name for spec in ROBOT_TOPICS if spec.direction == "in"),
+    services=frozenset({RESET_SERVICE}),
+    hint=": connect to ws://HOST:9090/robots/NAME?token=TOKEN with the robot's token (the "
+         "links file, or the page the student enrolled it with)")
+"""What a class robot's client needs its token for: driving it (the topics it subscribes),
+resetting it, offering services or actions on it. Changing its parameters and pausing it
+need admin rights (``require_admin``: the robot's token or the instructor's) in any case."""
 
 
 @dataclass
@@ -95,7 +114,8 @@ class RobotHost:
         self.faults = Faults()
         clock = robot.clock
         self.bridge = Bridge(clock=clock, faults=self.faults, refusals=(ConfigError,),
-                             reserved_namespaces=RESERVED_NAMESPACES)
+                             reserved_namespaces=RESERVED_NAMESPACES,
+                             drive_rules=DRIVE_RULES)
         self.endpoint = RobotEndpoint(self.bridge, robot)
         self.stats = TickStats()
         self.schedule = schedule or Schedule(TICK_PERIOD_S)

@@ -3,6 +3,12 @@
 The bridge asks ``check`` before every operation that names a topic, service or action; the
 one other access rule, admin rights for changing parameters, is ``services.require_admin``.
 
+A client without the drive right (``Session.may_drive``: a class robot's client that presented
+neither the robot's token nor the instructor's) may only watch: subscribe, list, call the
+services that change nothing. What changes the robot is the bridge's owner's to say
+(``DriveRules``: the topics the robot subscribes, its services that change it); offering
+services or actions, and sending goals, always need the right.
+
 Every client (student or admin) may:
 
 * subscribe to any topic: the robot's, other clients', and with ``--ros`` the ROS graph's;
@@ -23,12 +29,37 @@ connection cannot grow the server's tables without bound.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 from rosbridge.core.limits import ClientLimits
 
 RESERVED_TOPICS = frozenset({"/rosout", "/parameter_events"})
 """ROS infrastructure topics clients may not publish."""
+
+DRIVE_OPS = frozenset({"advertise_service", "advertise_action", "send_action_goal"})
+"""Operations that always need the drive right: offering services or actions on the robot,
+and sending goals (an action's server drives it)."""
+
+
+@dataclass(frozen=True)
+class DriveRules:
+    """What needs the drive right on a bridge, as its owner (the robot) says.
+
+    Attributes:
+        topics: topics the robot subscribes (``/cmd_vel``): publishing them needs the right.
+        services: services that change the robot (reset, parameters, pause).
+        hint: how to get the right, appended to a refusal.
+    """
+
+    topics: frozenset[str] = frozenset()
+    services: frozenset[str] = frozenset()
+    hint: str = ""
+
+    def refusal(self, what: str) -> str:
+        """The reason sent back to a client without the right."""
+        return (f"{what} changes the robot and needs its token; this connection may only "
+                f"watch (subscribe, list, call read-only services){self.hint}")
 
 class AccessError(Exception):
     """An operation the allow-list refuses; the message is the reason sent back."""
@@ -57,16 +88,24 @@ class Holder(Protocol):
     def limits(self) -> ClientLimits:
         """The bounds it lives within."""
 
+    @property
+    def may_drive(self) -> bool:
+        """Whether it may change the robot (``DriveRules``), not only watch it."""
 
-def check(client: Holder, op: str, name: str, reserved: tuple[str, ...] = ()) -> None:
+
+def check(client: Holder, op: str, name: str, reserved: tuple[str, ...] = (),
+          drive: DriveRules | None = None) -> None:
     """Raise ``AccessError`` unless ``client`` may do ``op`` on the topic, service or action.
 
     ``name`` is already resolved (``schema.resolve_name``). Operations that only give
     something up (``unsubscribe``, ``unadvertise``...) are always allowed. Topics the
     simulator publishes are refused by the bridge, which knows who owns them. ``reserved``:
     the namespaces (``"/virtual_robot/"``) in which clients may not offer services or
-    actions: the bridge's owner's own nodes.
+    actions: the bridge's owner's own nodes. ``drive``: what needs the drive right (None:
+    nothing, every client drives).
     """
+    if drive is not None and not client.may_drive:
+        _check_drive(op, name, drive)
     limits = client.limits
     if op == "subscribe":
         _within(client.subscriptions, name, limits.max_subscriptions, "subscriptions")
@@ -86,6 +125,16 @@ def check(client: Holder, op: str, name: str, reserved: tuple[str, ...] = ()) ->
             raise AccessError(f"{name}: actions under {', '.join(reserved)} "
                               "belong to the simulator")
         _within(client.actions, name, limits.max_actions, "actions")
+
+
+def _check_drive(op: str, name: str, drive: DriveRules) -> None:
+    """Raise ``AccessError`` if ``op`` on ``name`` changes the robot."""
+    if op in DRIVE_OPS:
+        raise AccessError(drive.refusal(f"{op} {name}"))
+    if op in ("advertise", "publish") and name in drive.topics:
+        raise AccessError(drive.refusal(f"publishing {name}"))
+    if op == "call_service" and name in drive.services:
+        raise AccessError(drive.refusal(f"calling {name}"))
 
 
 def _within(held: Mapping[str, Any], name: str, limit: int, what: str) -> None:

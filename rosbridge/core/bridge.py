@@ -65,6 +65,8 @@ class Bridge:
             own ``BridgeError`` and ``MessageError``.
         reserved_namespaces: the namespaces of the owner's own nodes (``"/virtual_robot/"``),
             in which clients may not offer services or actions.
+        drive_rules: what changes the owner's robot, which a client without the drive right
+            (``Session.may_drive``) may not do; None: every client may.
         service_timeout_s: how long a call to a client-provided service may take.
         faults: where unexpected exceptions are recorded (default: a new record).
 
@@ -83,9 +85,12 @@ class Bridge:
                  service_timeout_s: float = SERVICE_TIMEOUT_S,
                  faults: Faults | None = None,
                  refusals: tuple[type[Exception], ...] = (),
-                 reserved_namespaces: tuple[str, ...] = ()) -> None:
+                 reserved_namespaces: tuple[str, ...] = (),
+                 drive_rules: access.DriveRules | None = None) -> None:
         self.reserved_namespaces = reserved_namespaces
         """Where clients may not offer services or actions: the owner's own nodes'."""
+        self.drive_rules = drive_rules
+        """What a client needs the drive right for (None: nothing)."""
         self.clock: Clock = WallClock() if clock is None else clock
         self.refusals: tuple[type[Exception], ...] = (BridgeError, MessageError, *refusals)
         self.faults = faults or Faults()
@@ -212,7 +217,8 @@ class Bridge:
             if name_field is not None:
                 name = message[name_field] = resolve_name(message[name_field])
                 try:
-                    access.check(session, op, name, self.reserved_namespaces)
+                    access.check(session, op, name, self.reserved_namespaces,
+                                 self.drive_rules)
                 except access.AccessError as denied:
                     raise BridgeError(str(denied)) from None
             self._handlers[op](session, message)

@@ -141,6 +141,8 @@ class Session:
             sent, for a client that sees several robots under their names (the instructor's
             view of a class); empty: none. Names are prefixed in the messages, before they are
             encoded.
+        may_drive: whether it may change the robot (``access.DriveRules``): a class robot's
+            client with neither its token nor the instructor's may only watch.
 
     Attributes:
         advertised: topic -> {advertise id: type}; a topic stays advertised while any id does.
@@ -157,10 +159,13 @@ class Session:
 
     def __init__(self, peer: str, is_admin: bool, outbox: Outbox | None = None, *,
                  limits: ClientLimits | None = None,
-                 clock: Clock | None = None, namespace: str = "") -> None:
+                 clock: Clock | None = None, namespace: str = "",
+                 may_drive: bool = True) -> None:
         self.peer = peer
         self.namespace = namespace
         self.is_admin = is_admin
+        self.may_drive = may_drive
+        """Whether it may change the robot, not only watch (``access.DriveRules``)."""
         self.limits = limits or ClientLimits()
         self.outbox = outbox if outbox is not None else \
             Outbox(self.limits.max_queued_bytes, self.limits.max_replies)

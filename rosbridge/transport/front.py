@@ -102,6 +102,10 @@ class WebSocketFront(abc.ABC):
         """Whether ``token`` grants admin rights on robot ``name`` besides the admin token."""
         return False
 
+    def may_drive(self, name: str | None, is_admin: bool) -> bool:
+        """Whether a client of robot ``name`` may change it, not only watch (default: all)."""
+        return True
+
     @abc.abstractmethod
     def health(self) -> dict[str, Any]:
         """The /healthz document."""
@@ -173,8 +177,10 @@ class WebSocketFront(abc.ABC):
         is_admin = self.is_admin_token(token) or self.robot_admin(name, token)
         if token and not is_admin:
             log.warning("client %s presented a wrong admin token", peer)
-        await BridgeConnection(host.bridge, host.schedule, connection, peer, is_admin,
-                               self.limits, self.wire, self.clock).run()
+        client = BridgeConnection(host.bridge, host.schedule, connection, peer, is_admin,
+                                  self.limits, self.wire, self.clock)
+        client.session.may_drive = self.may_drive(name, is_admin)
+        await client.run()
 
     def _uptime_s(self) -> float:
         return round(self.clock.monotonic_s() - self.started_monotonic_s, 3)
