@@ -77,7 +77,8 @@ def shipped_definitions(folder: Path = INTERFACES_DIR) -> dict[str, Any]:
 
     A ``<package>/srv/<Type>.srv`` gives two messages, ``<package>/srv/<Type>_Request`` and
     ``_Response`` (ROS 2's names for a service's parts), so client-provided services of the
-    common types are checked as rosbridge fills them.
+    common types are checked as rosbridge fills them. A ``<package>/action/<Type>.action``
+    gives ``_Goal``, ``_Result`` and ``_Feedback``: goals are checked as requests are.
     """
     types: dict[str, Any] = {}
     for path in sorted(folder.glob("*/msg/*.msg")):
@@ -92,6 +93,13 @@ def shipped_definitions(folder: Path = INTERFACES_DIR) -> dict[str, Any]:
             parsed = get_types_from_msg(text.strip(), f"{name}_{part}")
             # rosbags names it pkg/srv/msg/Type_Part; ROS 2 (and rclpy) pkg/srv/Type_Part
             types.update({key.replace("/srv/msg/", "/srv/"): value
+                          for key, value in parsed.items()})
+    for path in sorted(folder.glob("*/action/*.action")):
+        name = f"{path.parent.parent.name}/action/{path.stem}"
+        parts = SRV_SEPARATOR.split(path.read_text(encoding="utf-8"), maxsplit=2)
+        for part, text in zip(("Goal", "Result", "Feedback"), parts, strict=True):
+            parsed = get_types_from_msg(text.strip(), f"{name}_{part}")
+            types.update({key.replace("/action/msg/", "/action/"): value
                           for key, value in parsed.items()})
     return types
 

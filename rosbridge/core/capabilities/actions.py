@@ -27,10 +27,12 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from rosbridge.core import relay
 from rosbridge.core.context import BridgeContext
 from rosbridge.core.errors import BridgeError
 from rosbridge.core.schema import GoalStatus
 from rosbridge.core.session import Session
+from rosbridge.msgs import definitions
 from rosbridge.msgs.values import normalize_type
 
 Cancel = Callable[[], None]
@@ -199,7 +201,10 @@ class Actions:
             raise BridgeError(f"send_action_goal {action}: a client may have at most "
                               f"{session.limits.max_goals} goals pending")
         sender = _ClientSender(session, goal_id, action, bool(message.get("feedback", False)))
-        args = message.get("args", {})
+        args = goal_args(type_name, message.get("args", {}))
+        server = self._servers.get(action)
+        relay.charge(session, f"send_action_goal {action}",
+                     None if server is None else server[0])
         if action in self._servers:
             self._forward(sender, session, goal_id, action, type_name, args)
             return
@@ -256,14 +261,17 @@ class Actions:
 
     def _feedback(self, session: Session, message: dict[str, Any]) -> None:
         goal = self._goals[self._served_by(session, message)]
-        if not session.relay_budget.take(session.frame_bytes):
-            raise BridgeError(f"action_feedback {goal.action}: more than "
-                              f"{session.limits.relay_bytes_per_s} bytes/s relayed; feedback "
-                              "dropped")
+        relay.charge(session, f"action_feedback {goal.action}", goal.owner)
         goal.sender.goal_feedback(message.get("values", {}))
 
     def _result(self, session: Session, message: dict[str, Any]) -> None:
         key = self._served_by(session, message)
+        try:
+            relay.charge(session, f"action_result {message['action']}", self._goals[key].owner)
+        except BridgeError as error:  # the sender still hears of its goal's end
+            self._finish(key, f"the server's result was refused: {error}",
+                         GoalStatus.ABORTED, False)
+            raise
         status = GoalStatus(message["status"])
         if not message["result"] or status not in (GoalStatus.SUCCEEDED, GoalStatus.CANCELED):
             status = GoalStatus.ABORTED
@@ -396,6 +404,27 @@ class _Relay:
 
     def goal_result(self, values: Any, status: GoalStatus, result: bool) -> None:
         self.actions._finish(self.key, values, status, result)
+
+
+def goal_args(action_type: str, args: Any) -> Any:
+    """A goal's args in canonical form, where the action's type is known (as requests are).
+
+    rosbridge fills the ROS goal from them: a field the type lacks or a value of the wrong
+    type fails the goal, missing fields take defaults; an unknown type's args pass as they
+    are (its server checks them).
+
+    Raises:
+        BridgeError: the args do not fit the goal type.
+    """
+    goal_type = f"{action_type}_Goal"
+    if not definitions.known(goal_type):
+        return args
+    if args in ([], None):  # roslibpy and roslibjs send [] for an empty goal
+        args = {}
+    try:
+        return definitions.canonical(goal_type, args)
+    except ValueError as error:  # MessageError
+        raise BridgeError(f"the goal does not fit {action_type}: {error}") from None
 
 
 def _action_type(action: str, type_name: str) -> str:

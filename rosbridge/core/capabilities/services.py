@@ -13,6 +13,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from rosbridge.core import relay
 from rosbridge.core.context import BridgeContext
 from rosbridge.core.errors import BridgeError, shorten
 from rosbridge.core.session import Session
@@ -179,12 +180,19 @@ class Services:
         if service in self._providers:
             try:
                 args = request_args(self._providers[service][1], args)
+                relay.charge(session, f"call_service {service}", self._providers[service][0])
             except self._context.refusals as error:
                 self.fail(session, call_id, service, f"{service}: {shorten(str(error))}")
                 return
             self._forward(session, service, args, self._answer_for(session, call_id, service))
             return
         if service not in self._local:
+            if self._context.graph.attached:
+                try:
+                    relay.charge(session, f"call_service {service}")
+                except self._context.refusals as error:
+                    self.fail(session, call_id, service, shorten(str(error)))
+                    return
             if not self._context.graph.call_service(
                     service, args if isinstance(args, dict) else {},
                     self._answer_for(session, call_id, service)):
@@ -256,6 +264,12 @@ class Services:
             raise BridgeError(f"service_response for {message['service']}: no call "
                               f"with id {str(message.get('id'))[:80]!r} is waiting for it")
         del self._pending[str(message["id"])]
+        try:
+            relay.charge(session, f"service_response for {call.service}", call.caller)
+        except self._context.refusals as error:  # the caller still hears of its call
+            call.answer(False, f"{call.service}: the provider's response was refused: "
+                               f"{shorten(str(error))}")
+            raise
         try:
             values = response_values(self._providers_type(session, call.service),
                                      message.get("values", {}))
