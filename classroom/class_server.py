@@ -5,7 +5,11 @@ names under ``/NAME/`` (``instructor_view.py``). Inside a robot's URL everything
 real robot (``/cmd_vel``, ``/odom``, ``/scan``, the
 parameter services, ``/reset_simulation``, un-namespaced), so a student's code for their
 robot works on the real robot with only the URL changed. The admin token rules every robot;
-each robot's own token rules that robot only.
+each robot's own token rules that robot only. A connection with neither may watch a robot
+(subscribe, list, call read-only services) but not change it (``may_drive``), unless the
+class was started with ``--open-drive``. In an open class, the first connection to a name it
+enrols is handed that robot (``Classroom.claim``): its page asks ``/websim/token`` once and
+keeps the token.
 """
 
 from __future__ import annotations
@@ -33,13 +37,16 @@ class ClassServer(WebSocketFront):
         admin_token: the instructor's secret, admin on every robot.
         limits: the bounds every client lives within.
         origins: which web pages may connect; None: any (tests and benchmarks).
+        open_drive: every connection may drive any robot (``--open-drive``), as before
+            robots had owners; parameters and pausing still need a token.
     """
 
     def __init__(self, classroom: Classroom, admin_token: str,
                  limits: ClientLimits | None = None,
-                 origins: OriginPolicy | None = None) -> None:
+                 origins: OriginPolicy | None = None, *, open_drive: bool = False) -> None:
         super().__init__(admin_token, limits, origins, classroom.clock)
         self.classroom = classroom
+        self.open_drive = open_drive
 
     def route(self, path: str) -> tuple[Destination, str | None] | str:
         """``/robots/NAME`` (a trailing slash allowed) is robot NAME; nothing else is a robot."""
@@ -60,8 +67,17 @@ class ClassServer(WebSocketFront):
         return InstructorView(self.classroom), self.classroom.schedule
 
     def robot_admin(self, name: str | None, token: str | None) -> bool:
-        """A robot's own token is admin on that robot."""
-        return name is not None and self.classroom.is_robot_token(name, token)
+        """A robot's own token is admin on that robot.
+
+        So is the first connection to a name an open class enrolled (it is handed the
+        token: ``/websim/token``).
+        """
+        return name is not None and (self.classroom.is_robot_token(name, token)
+                                     or self.classroom.claim(name))
+
+    def may_drive(self, name: str | None, is_admin: bool) -> bool:
+        """Only the robot's owner (its token) and the instructor change it (or all: open_drive)."""
+        return self.open_drive or is_admin
 
     async def run_ticks(self) -> None:
         """Tick every robot forever."""

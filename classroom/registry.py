@@ -14,19 +14,26 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import contextlib
 import hashlib
 import hmac
+import logging
 import re
 import secrets
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
+from classroom.state import SAVE_INTERVAL_S, ClassState
 from physics import TICK_PERIOD_S, ConfigError
-from ros_nodes.robot_host import RobotHost
+from physics.snapshots import Pose2D
+from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
+from ros_nodes.robot_services import require_admin
 from ros_nodes.sensors import Sensor
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.clock import Clock, WallClock
+from rosbridge.core.session import Session
 from rosbridge.transport.schedule import Schedule
 
 ROBOT_NAME = re.compile(r"[a-z0-9_-]{1,32}")
@@ -47,8 +54,22 @@ SLOTS = 10
 ``SPREAD / SLOTS`` of the period (4 ms at 20 Hz). A robot's frames go out after its group, not
 after the whole class; and the event loop wakes ten times a tick, not once per robot."""
 
-TOKEN_BYTES = 12
-"""Random bytes of a generated robot token (16 URL-safe characters)."""
+TOKEN_BYTES = 18
+"""Bytes of a robot token (24 URL-safe characters)."""
+
+MIN_TOKEN_CHARS = 20
+"""The shortest token accepted (``--admin-token``, a roster's token field)."""
+
+TOKEN_CHARS = re.compile(r"[A-Za-z0-9._~-]+")
+"""What a token may be made of: URL-safe characters (it travels in ``?token=``)."""
+
+TOKEN_CLASSES = (("lower-case letters", re.compile(r"[a-z]")),
+                 ("upper-case letters", re.compile(r"[A-Z]")),
+                 ("digits", re.compile(r"[0-9]")),
+                 ("symbols (. _ ~ -)", re.compile(r"[._~-]")))
+"""A token must mix at least three of these four classes of characters."""
+
+log = logging.getLogger("websim.class")
 
 
 @dataclass(frozen=True)
@@ -103,6 +124,8 @@ def read_roster(path: str | Path) -> list[Student]:
         seen.add(name)
         world = fields[1] if len(fields) > 1 and fields[1] else None
         token = fields[2] if len(fields) > 2 and fields[2] else None
+        if token is not None and (why := weak_token(token)) is not None:
+            raise ConfigError(f"{where}: the token of '{name}' is too weak: {why}")
         students.append(Student(name, world, token))
     if not students:
         raise ConfigError(f"{source}: the roster names no student")
@@ -110,14 +133,39 @@ def read_roster(path: str | Path) -> list[Student]:
 
 
 def derived_token(secret: str, name: str) -> str:
-    """Robot ``name``'s token derived from the instructor's ``secret`` (HMAC-SHA256).
+    """Robot ``name``'s token derived from the class's random ``secret`` (HMAC-SHA256).
 
-    The same secret gives the same tokens after a restart (the links file stays valid) and
-    on every process of a class; a student's token says nothing of the secret or of other
-    robots' tokens.
+    The secret is the class's own (``classroom.state``), never the instructor's token: a
+    student's token says nothing of the secret, of the instructor's token or of other robots'
+    tokens, and the same state file gives the same tokens after a restart.
     """
     digest = hmac.new(secret.encode(), f"websim robot {name}".encode(), hashlib.sha256)
     return base64.urlsafe_b64encode(digest.digest()[:TOKEN_BYTES]).decode()
+
+
+def weak_token(token: str) -> str | None:
+    """Why ``token`` is too weak to guard a robot or a class, or None if it is strong enough.
+
+    Strong: at least ``MIN_TOKEN_CHARS`` characters, URL-safe only (A-Z a-z 0-9 . _ ~ -),
+    mixing at least three of lower-case letters, upper-case letters, digits and symbols.
+    """
+    if len(token) < MIN_TOKEN_CHARS:
+        return f"{len(token)} characters, at least {MIN_TOKEN_CHARS} are needed"
+    if not TOKEN_CHARS.fullmatch(token):
+        return "only A-Z, a-z, 0-9 and . _ ~ - may be used (it travels in URLs)"
+    missing = [name for name, pattern in TOKEN_CLASSES if not pattern.search(token)]
+    if len(missing) > 1:
+        return (f"it must mix at least three of lower-case letters, upper-case letters, "
+                f"digits and symbols (. _ ~ -); it has no {' and no '.join(missing)}")
+    return None
+
+
+def strong_token() -> str:
+    """A random token ``weak_token`` accepts (192 bits)."""
+    while True:
+        token = secrets.token_urlsafe(24)
+        if weak_token(token) is None:
+            return token
 
 
 def numbered_roster(count: int) -> list[Student]:
@@ -139,11 +187,15 @@ class Classroom:
         open_class: enrol unknown names on their first connection.
         max_robots: most robots an open class holds.
         idle_pause_s: a robot nobody has been connected to for this long pauses.
-        make_token: makes robot NAME's token when the roster gives none (default: random).
+        make_token: makes robot NAME's token when the roster gives none (default: derived
+            from the class secret).
         lazy: create a robot on its first ``get`` rather than at start (a worker of a class
             spread over several processes hosts only the robots routed to it).
         clock: the class's clock (the one its robots are made with): its monotonic time
             places the groups' ticks within a period. Default: wall time.
+        state: the class's state file: its secret, enrolments and robots' state, restored
+            now and saved every ``SAVE_INTERVAL_S`` while ``run_ticks`` runs. None: a random
+            secret, nothing kept.
     """
 
     def __init__(self, roster: list[Student], make_robot: Callable[[Student], VirtualRobot],
@@ -151,27 +203,61 @@ class Classroom:
                  max_robots: int = DEFAULT_MAX_ROBOTS,
                  idle_pause_s: float | None = DEFAULT_IDLE_PAUSE_S,
                  make_token: Callable[[str], str] | None = None, lazy: bool = False,
-                 clock: Clock | None = None) -> None:
+                 clock: Clock | None = None, state: ClassState | None = None) -> None:
         self.schedule = schedule or Schedule(TICK_PERIOD_S)
         self.clock: Clock = WallClock() if clock is None else clock
         """The class's one clock (its robots' too)."""
         self.open_class = open_class
         self.max_robots = max(max_robots, len(roster))
+        self.state = state
+        self.secret = state.secret if state is not None else secrets.token_urlsafe(32)
+        """The random secret robot tokens derive from (kept in the state file)."""
         self._make_robot = make_robot
         self._idle_pause_s = idle_pause_s
-        self._make_token = make_token or (lambda name: secrets.token_urlsafe(TOKEN_BYTES))
+        self._make_token = make_token or (lambda name: derived_token(self.secret, name))
         self._hosts: dict[str, RobotHost] = {}
         self._tokens: dict[str, str] = {}
+        self._saved: dict[str, dict[str, Any]] = {} if state is None else state.robots()
+        self.unclaimed: set[str] = set()
+        """Names enrolled in an open class whose token nobody has been handed yet."""
         self.students: dict[str, Student] = {student.name: student for student in roster}
-        if not lazy:
-            for student in roster:
+        enrolled = {} if state is None else state.enrolments()
+        for name, claimed in enrolled.items():
+            if name not in self.students and ROBOT_NAME.fullmatch(name):
+                self.students[name] = Student(name)
+                if not claimed:
+                    self.unclaimed.add(name)
+        for student in roster:
+            if not lazy:
                 self._enrol(student)
+        for name in enrolled:
+            if name in self.students and name not in self._hosts and (
+                    not lazy or name in self._saved):
+                self._enrol(self.students[name])
+        if lazy:
+            for name in self._saved:
+                if name in self.students and name not in self._hosts:
+                    self._enrol(self.students[name])
 
     def _enrol(self, student: Student) -> RobotHost:
         host = RobotHost(self._make_robot(student), self.schedule, self._idle_pause_s)
         self._hosts[student.name] = host
         self.students[student.name] = student
         self.token(student.name)
+        name = student.name
+
+        def robot_token(args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+            require_admin(session, TOKEN_SERVICE)
+            return {"token": self.token(name)}
+
+        host.bridge.services.add(TOKEN_SERVICE, "websim/srv/RobotToken", robot_token)
+        saved = self._saved.pop(name, None)
+        if saved is not None:
+            try:
+                restore_robot(host, saved)
+            except (ConfigError, KeyError, TypeError, ValueError) as error:
+                log.error("robot %s: its saved state could not be restored (%s); it starts "
+                          "at its spawn pose", name, error)
         return host
 
     def __iter__(self) -> Iterator[tuple[str, RobotHost]]:
@@ -188,17 +274,37 @@ class Classroom:
     def get(self, name: str) -> RobotHost | None:
         """The robot ``name``, created now if it is not yet (lazily, or enrolling).
 
+        A name an open class enrols now waits for its student (``claim``).
+
         None: no such robot (unknown, invalid, or the open class is full).
         """
         host = self._hosts.get(name)
         if host is not None or not self.knows(name):
             return host
-        if name not in self.students and len(self._hosts) >= self.max_robots:
-            return None
+        if name not in self.students:
+            if len(self._hosts) >= self.max_robots:
+                return None
+            self.unclaimed.add(name)
+            if self.state is not None:
+                self.state.enrol(name)
         return self._enrol(self.students.get(name, Student(name)))
 
+    def claim(self, name: str) -> bool:
+        """Hand robot ``name`` to the connection asking; whether it was handed.
+
+        True once, for the first connection to a name the open class enrolled; nobody else
+        can take it afterwards.
+        """
+        if name not in self.unclaimed:
+            return False
+        self.unclaimed.discard(name)
+        if self.state is not None:
+            self.state.enrol(name, claimed=True)
+        log.info("robot %s enrolled: its token was handed to its first connection", name)
+        return True
+
     def token(self, name: str) -> str:
-        """Robot ``name``'s own admin token (roster robots, created or not)."""
+        """Robot ``name``'s own token (roster robots, created or not)."""
         if name not in self._tokens:
             student = self.students[name]
             self._tokens[name] = student.token or self._make_token(name)
@@ -211,6 +317,15 @@ class Classroom:
             return False
         return hmac.compare_digest(presented.encode(), expected.encode())
 
+    def save(self) -> None:
+        """Save every robot's state in the state file (if any); never raises."""
+        if self.state is None:
+            return
+        try:
+            self.state.save_robots({name: robot_state(host) for name, host in self})
+        except Exception as error:  # a full disk must not stop the class
+            log.error("could not save the class's state in %s: %s", self.state.path, error)
+
     async def run_ticks(self) -> None:
         """Tick every robot on the one schedule, forever (each robot's faults stay its own).
 
@@ -219,7 +334,19 @@ class Classroom:
         steps instead of waiting for every other robot's, so its latency does not grow with
         the class, and the work of a tick does not arrive on the event loop all at once.
         """
-        await self.schedule.run(self._tick_all)
+        saver = asyncio.create_task(self._save_every(SAVE_INTERVAL_S))
+        try:
+            await self.schedule.run(self._tick_all)
+        finally:
+            saver.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await saver
+            self.save()
+
+    async def _save_every(self, interval_s: float) -> None:
+        while True:
+            await asyncio.sleep(interval_s)
+            self.save()
 
     def _tick_all(self, lateness_s: float) -> None:
         hosts = [host for _, host in self]
@@ -266,3 +393,30 @@ class Classroom:
                                            "together", error)
         for host in advanced:
             host.end_tick(late_s)
+
+
+def robot_state(host: RobotHost) -> dict[str, Any]:
+    """What a restart restores of a robot.
+
+    Its runtime parameters (mode, payload...), whether it is held (``/websim/pause``), its
+    true pose and its odometry.
+    """
+    robot = host.robot
+    parameters = robot.parameters
+    truth, odometry = robot.sim.ground_truth(), robot.sim.odometry()
+    return {
+        "parameters": {name: parameters.get(name) for name in parameters.names()
+                       if parameters.spec(name).runtime},
+        "held": host.held,
+        "pose": [truth.x, truth.y, truth.theta],
+        "odometry": [odometry.x, odometry.y, odometry.theta],
+    }
+
+
+def restore_robot(host: RobotHost, saved: Mapping[str, Any]) -> None:
+    """Put a robot back as ``robot_state`` saved it (ConfigError: a value no longer valid)."""
+    robot = host.robot
+    robot.parameters.set_many(dict(saved["parameters"]))
+    robot.sim.place(Pose2D(*map(float, saved["pose"])), Pose2D(*map(float, saved["odometry"])))
+    host.held = bool(saved["held"])
+    host.stats.paused = host.stats.paused or host.held

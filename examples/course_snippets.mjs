@@ -8,7 +8,9 @@
 // robot forward and into a left turn for two seconds by publishing geometry_msgs/msg/Twist on
 // /cmd_vel, prints what it sees, stops the robot and exits. It runs unmodified against
 // `websim serve` (ws://localhost:9090), the Docker stack (ws://HOST:9090) or the real robot's
-// rosbridge: only the URL changes (section 2.5.6.3).
+// rosbridge: only the URL changes (section 2.5.6.3). In a class (`websim serve --class`) the URL
+// is your robot's with its token, ws://HOST:9090/robots/NAME?token=TOKEN: without the token you
+// may watch the robot but not drive it.
 //
 // roslib 2.x is an ES module only: `require('roslib')` fails, so this file is .mjs and says
 // `import * as ROSLIB from 'roslib'`. Node finds `roslib` in the node_modules folder next to
@@ -50,12 +52,12 @@ ros.on('error', (error) => {
 ros.on('close', () => console.log('Connection closed'));
 
 const giveUp = setTimeout(() => {
-  console.error(`no /odom and /scan from ${url} within ${TIMEOUT_MS} ms`);
+  console.error(`no /odom and /scan from ${url.split('?')[0]} within ${TIMEOUT_MS} ms`);
   process.exit(1);
 }, TIMEOUT_MS);
 
 ros.on('connection', () => {
-  console.log(`Connected to ROS 2 at ${url}`);
+  console.log(`Connected to ROS 2 at ${url.split('?')[0]}`); // never print a ?token=
 
   // 2.5.5.2 Publishing velocity commands
   const cmdVel = new ROSLIB.Topic({

@@ -1,13 +1,16 @@
 """The course's rosbridge snippets (section 2.5.5) with roslibpy instead of roslibjs.
 
     python examples/course_snippets.py [ws://localhost:9090]
+    python examples/course_snippets.py ws://HOST:9090/robots/NAME?token=TOKEN   (a class)
     python examples/course_snippets.py HOST [PORT]
 
 Connects to rosbridge, subscribes to /odom and /scan, drives the robot forward and into a left
 turn for two seconds by publishing geometry_msgs/msg/Twist on /cmd_vel, prints what it sees,
 stops the robot and exits (status 1 if no data arrived). The same script runs unmodified
 against ``websim serve`` (ws://localhost:9090), the Docker stack (ws://HOST:9090) or the real
-robot's rosbridge: only the address changes. Needs ``pip install roslibpy``.
+robot's rosbridge: only the address changes. In a class (``websim serve --class``) the address
+is your robot's, with its token: without the token you may watch it but not drive it. Needs
+``pip install roslibpy``.
 """
 
 from __future__ import annotations
@@ -59,10 +62,15 @@ def twist(linear_mps: float, angular_rps: float) -> roslibpy.Message:
 
 def main(argv: list[str]) -> int:
     """Connect, look, drive, stop; 0 on success, 1 if no data arrived."""
-    host, port, secure = address(argv)
-    ros = roslibpy.Ros(host=host, port=port, is_secure=secure)
+    if argv and "://" in argv[0]:  # a URL as given: its path (/robots/NAME) and ?token=
+        ros = roslibpy.Ros(host=argv[0])
+        shown = argv[0].split("?", 1)[0]  # never print the token
+    else:
+        host, port, secure = address(argv)
+        ros = roslibpy.Ros(host=host, port=port, is_secure=secure)
+        shown = f"{host}:{port}"
     ros.run(timeout=CONNECT_TIMEOUT_S)  # raises if the connection fails
-    print(f"Connected to ROS 2 at {host}:{port}")
+    print(f"Connected to ROS 2 at {shown}")
 
     cmd_vel = roslibpy.Topic(ros, "/cmd_vel", "geometry_msgs/msg/Twist")
     odom_listener = roslibpy.Topic(ros, "/odom", "nav_msgs/msg/Odometry")

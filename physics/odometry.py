@@ -25,6 +25,12 @@ class OdometryIntegrator:
         self._v = 0.0
         self._omega = 0.0
 
+    def place(self, pose: Pose2D) -> None:
+        """Read ``pose`` from now on, at rest (a restored robot's odometry)."""
+        self._pose = Pose2D(float(pose.x), float(pose.y), float(pose.theta))
+        self._v = 0.0
+        self._omega = 0.0
+
     def integrate(self, samples: Iterable[EncoderSample], v_noise_mps: float = 0.0,
                   omega_noise_rps: float = 0.0) -> None:
         """Integrate encoder samples with Eq. 1-3, each speed offset by the given noise."""

@@ -23,7 +23,7 @@ from physics.lidar import Lidar, ScanRequest, scan_many
 from physics.odometry import OdometryIntegrator
 from physics.params import LidarParams, NoiseParams, RobotParams
 from physics.robot import MobileRobotPhysics
-from physics.snapshots import Command, LaserScan, Odometry, RobotState
+from physics.snapshots import Command, LaserScan, Odometry, Pose2D, RobotState
 from physics.space import WALLS_ONLY, WorldSpace, build_world_space
 from physics.validation import ConfigError, as_finite_float
 from physics.world import World
@@ -240,6 +240,20 @@ class Simulation:
         self._command = clamp_command(*self._command, params.max_linear_mps,
                                       params.max_angular_rps)
         return params
+
+    def place(self, pose: Pose2D, odometry: Pose2D) -> None:
+        """Put the robot at rest at ``pose`` (map frame) with odometry reading ``odometry``.
+
+        What a class restores after a restart (``classroom.state``); a pose whose footprint
+        overlaps a wall is refused (ConfigError) and nothing is changed.
+        """
+        _check_clearance(self._world_space, self._world, pose.x, pose.y,
+                         self._robot.params.footprint_radius_m, "restored pose",
+                         f"{list(pose)}")
+        self._robot.teleport(pose)
+        self._odometry.place(odometry)
+        self._command = Command(0.0, 0.0)
+        self._scan_cache = None
 
     def reset(self, *, seed: int | None = None) -> None:
         """Back to the spawn pose at rest with a zero command and odometry zeroed.

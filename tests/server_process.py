@@ -10,13 +10,14 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 import urllib.request
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-ADMIN_TOKEN = "test-admin-token"
+ADMIN_TOKEN = "Test-admin-token-2026-suite"
 
 
 def free_port() -> int:
@@ -110,7 +111,10 @@ def start_server(extra_args: Sequence[str] = (), ws_port: int | None = None,
                "--admin-token", ADMIN_TOKEN, *extra_args]
     preexec = None if open_files is None else functools.partial(limit_open_files, open_files)
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                               text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                               text=True, env={**os.environ, "PYTHONUNBUFFERED": "1",
+                                               # a class's default state file: the server's own
+                                               "XDG_DATA_HOME": tempfile.mkdtemp(
+                                                   prefix="websim-data-")},
                                preexec_fn=preexec, cwd=cwd)
     server = ServerProcess(ws_port, http_port, process)
 

@@ -39,13 +39,15 @@ from rosbridge.core.session import Session
 from server_process import ADMIN_TOKEN, ServerProcess, start_server, wait_for
 
 TWIST = {"linear": {"x": 0.3}, "angular": {"z": 0.0}}
-CAROL_TOKEN = "carols-own-token"
+CAROL_TOKEN = "Carols-Own-Token-2026"
+TOKENS: dict[str, str] = {}
+"""The class's robot tokens, from its links file (the ``server`` fixture's)."""
 
 
 @pytest.fixture(scope="module")
 def roster(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp("class") / "roster.txt"
-    path.write_text("# a class\nalice\nbob, maze\ncarol,,carols-own-token\n")
+    path.write_text("# a class\nalice\nbob, maze\ncarol,,Carols-Own-Token-2026\n")
     return path
 
 
@@ -57,6 +59,7 @@ def links(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def server(roster: Path, links: Path) -> Iterator[ServerProcess]:
     running = start_server(["--class", str(roster), "--links", str(links)])
+    TOKENS.update({row["name"]: row["token"] for row in csv.DictReader(links.open())})
     yield running
     running.stop()
 
@@ -64,6 +67,11 @@ def server(roster: Path, links: Path) -> Iterator[ServerProcess]:
 def robot_url(server: ServerProcess, name: str, token: str | None = None) -> str:
     return f"ws://127.0.0.1:{server.ws_port}/robots/{name}" + (f"?token={token}"
                                                                 if token else "")
+
+
+def owner_url(server: ServerProcess, name: str) -> str:
+    """Robot ``name``'s URL with its token: its owner's (who may drive it)."""
+    return robot_url(server, name, TOKENS[name])
 
 
 async def first(ws: Any, topic: str) -> dict[str, Any]:
@@ -131,7 +139,7 @@ def test_a_bad_world_on_the_roster_stops_the_server_with_the_reason(tmp_path: Pa
 
 def test_driving_one_robot_leaves_the_others_where_they_are(server: ServerProcess) -> None:
     async def drive() -> tuple[float, float]:
-        async with websockets.connect(robot_url(server, "alice")) as alice:
+        async with websockets.connect(owner_url(server, "alice")) as alice:
             await alice.send(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": TWIST}))
             await asyncio.sleep(1.0)
             await alice.send(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": {}}))
@@ -145,8 +153,8 @@ def test_driving_one_robot_leaves_the_others_where_they_are(server: ServerProces
 
 def test_topics_latches_and_resets_stay_on_their_robot(server: ServerProcess) -> None:
     async def scenario() -> tuple[list[Any], dict[str, Any], dict[str, Any]]:
-        async with websockets.connect(robot_url(server, "alice")) as alice, \
-                websockets.connect(robot_url(server, "carol")) as carol:
+        async with websockets.connect(owner_url(server, "alice")) as alice, \
+                websockets.connect(owner_url(server, "carol")) as carol:
             for ws in (alice, carol):
                 await ws.send(json.dumps({"op": "subscribe", "topic": "/chat"}))
             await alice.send(json.dumps({"op": "advertise", "topic": "/chat",
@@ -181,11 +189,11 @@ def test_topics_latches_and_resets_stay_on_their_robot(server: ServerProcess) ->
 def test_reset_resets_only_the_callers_robot(server: ServerProcess) -> None:
     async def scenario() -> tuple[float, float]:
         for name in ("alice", "carol"):
-            async with websockets.connect(robot_url(server, name)) as ws:
+            async with websockets.connect(owner_url(server, name)) as ws:
                 await ws.send(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": TWIST}))
                 await asyncio.sleep(0.5)
                 await ws.send(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": {}}))
-        await call(robot_url(server, "carol"), "/reset_simulation", {})
+        await call(owner_url(server, "carol"), "/reset_simulation", {})
         return (await ground_truth_x(robot_url(server, "alice")),
                 await ground_truth_x(robot_url(server, "carol")))
 
@@ -283,11 +291,13 @@ def test_an_open_class_enrols_new_names_up_to_its_limit(tmp_path: Path) -> None:
 
 
 def test_a_robot_nobody_uses_pauses_and_resumes_with_its_state(tmp_path: Path) -> None:
-    server = start_server(["--class", "2", "--idle-pause", "0.5"])
+    links = tmp_path / "links.csv"
+    server = start_server(["--class", "2", "--idle-pause", "0.5", "--links", str(links)])
     url = robot_url(server, "robot01")
+    token = {row["name"]: row["token"] for row in csv.DictReader(links.open())}["robot01"]
     try:
         async def drive() -> None:
-            async with websockets.connect(url) as ws:
+            async with websockets.connect(robot_url(server, "robot01", token)) as ws:
                 await ws.send(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": TWIST}))
                 await asyncio.sleep(0.3)
 
@@ -413,9 +423,98 @@ def test_students_cannot_ask_for_status_or_pause(server: ServerProcess) -> None:
     assert reply["result"] is False and "needs admin rights" in reply["values"]
 
 
-def test_robot_tokens_derive_from_the_instructor_token(server: ServerProcess,
-                                                      links: Path) -> None:
+def test_robot_tokens_derive_from_the_class_secret_not_the_instructor_token(
+        server: ServerProcess, links: Path) -> None:
     rows = {row["name"]: row["token"] for row in csv.DictReader(links.open())}
-    assert rows["alice"] == derived_token(ADMIN_TOKEN, "alice")  # stable across restarts
-    assert rows["alice"] != derived_token(ADMIN_TOKEN, "bob") != derived_token("other", "alice")
+    assert rows["alice"] != derived_token(ADMIN_TOKEN, "alice")  # no offline guessing
+    assert len(rows["alice"]) == 24 and len(set(rows.values())) == 3
     assert rows["carol"] == CAROL_TOKEN  # the roster's own token wins
+
+
+# ---- only a robot's owner drives it (issue 20, section 4) -------------------------------------
+
+async def replies(url: str, operations: list[dict[str, Any]], wait_s: float = 0.6
+                  ) -> list[dict[str, Any]]:
+    """Send ``operations`` (asking for status errors), collect what comes back for a while."""
+    got: list[dict[str, Any]] = []
+    async with websockets.connect(url) as ws:
+        await ws.send(json.dumps({"op": "set_level", "level": "error"}))
+        for operation in operations:
+            await ws.send(json.dumps(operation))
+        deadline = time.monotonic() + wait_s
+        with contextlib.suppress(TimeoutError, asyncio.TimeoutError):
+            while (left := deadline - time.monotonic()) > 0:
+                got.append(json.loads(await asyncio.wait_for(ws.recv(), left)))
+    return got
+
+
+def test_a_classmate_without_the_token_watches_but_cannot_drive_or_reset(
+        server: ServerProcess) -> None:
+    start_x = asyncio.run(ground_truth_x(robot_url(server, "bob")))  # watching works
+    got = asyncio.run(replies(robot_url(server, "bob"), [
+        {"op": "subscribe", "topic": "/odom"},
+        {"op": "advertise", "topic": "/cmd_vel", "type": "geometry_msgs/Twist"},
+        {"op": "publish", "topic": "/cmd_vel", "msg": TWIST},
+        {"op": "call_service", "service": "/reset_simulation", "id": "r"},
+        {"op": "call_service", "service": "/rosapi/topics", "id": "t"},
+        {"op": "advertise_service", "service": "/bobs_service", "type": "std_srvs/Empty"},
+    ], wait_s=1.0))
+    reasons = [m["msg"] for m in got if m.get("op") == "status"]
+    assert any(r.startswith("publishing /cmd_vel changes the robot and needs its token")
+               for r in reasons), reasons
+    assert any("advertise_service /bobs_service changes the robot" in r for r in reasons)
+    assert all("ws://HOST:9090/robots/NAME?token=TOKEN" in r for r in reasons)
+    calls = {m["id"]: m for m in got if m.get("op") == "service_response"}
+    assert calls["r"]["result"] is False and "needs its token" in calls["r"]["values"]
+    assert calls["t"]["result"] is True and "/odom" in calls["t"]["values"]["topics"]
+    assert any(m.get("topic") == "/odom" for m in got), "a watcher gets the robot's topics"
+    assert asyncio.run(ground_truth_x(robot_url(server, "bob"))) == start_x == 0.0
+    # bob's own token (or the instructor's) drives bob; alice's token does not
+    for token, moves in ((TOKENS["alice"], False), (TOKENS["bob"], True), (ADMIN_TOKEN, True)):
+        got = asyncio.run(replies(robot_url(server, "bob", token), [
+            {"op": "publish", "topic": "/cmd_vel", "msg": TWIST},
+            {"op": "call_service", "service": "/reset_simulation", "id": "r"}], wait_s=0.3))
+        reset = next(m for m in got if m.get("op") == "service_response")
+        assert reset["result"] is moves, token
+
+
+def test_open_drive_lets_anyone_drive_as_before(tmp_path: Path) -> None:
+    server = start_server(["--class", "2", "--open-drive"])
+    try:
+        got = asyncio.run(replies(robot_url(server, "robot02"), [
+            {"op": "publish", "topic": "/cmd_vel", "msg": TWIST},
+            {"op": "call_service", "service": "/reset_simulation", "id": "r"},
+            {"op": "call_service", "service": "/virtual_robot/set_parameters", "id": "p",
+             "args": {"parameters": []}}], wait_s=0.3))
+        calls = {m["id"]: m for m in got if m.get("op") == "service_response"}
+        assert calls["r"]["result"] is True
+        assert calls["p"]["result"] is False and "needs admin rights" in calls["p"]["values"]
+    finally:
+        server.stop()
+    assert "anyone may drive any robot (--open-drive)" in "".join(server.output)
+
+
+def test_an_open_class_hands_a_new_name_to_its_first_connection_only(tmp_path: Path) -> None:
+    path = tmp_path / "roster.txt"
+    path.write_text("alice\n")
+    server = start_server(["--class", str(path), "--open-class"])
+    try:
+        token_call = {"op": "call_service", "service": "/websim/token", "id": "k"}
+        first_got = asyncio.run(replies(robot_url(server, "dave"), [token_call], 0.3))
+        handed = next(m for m in first_got if m.get("op") == "service_response")
+        assert handed["result"] is True
+        token = handed["values"]["token"]
+        assert len(token) == 24
+        later = asyncio.run(replies(robot_url(server, "dave"), [
+            token_call, {"op": "publish", "topic": "/cmd_vel", "msg": TWIST}], 0.3))
+        again = next(m for m in later if m.get("op") == "service_response")
+        assert again["result"] is False, "nobody else takes dave's token"
+        assert any("needs its token" in m.get("msg", "") for m in later)
+        owner = asyncio.run(replies(robot_url(server, "dave", token), [
+            {"op": "call_service", "service": "/reset_simulation", "id": "r"}], 0.3))
+        assert next(m for m in owner if m.get("op") == "service_response")["result"] is True
+        config = json.load(urllib.request.urlopen(
+            f"{server.http_url}/robots/dave/config.json", timeout=5))
+        assert config["robotToken"]["name"] == "/websim/token"
+    finally:
+        server.stop()

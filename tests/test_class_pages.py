@@ -55,14 +55,19 @@ def robot_state(server: ServerProcess, name: str) -> dict[str, Any]:
         return state
 
 
-def test_a_robots_page_drives_that_robot_only(server: ServerProcess, browser: Any) -> None:
+def test_a_robots_page_drives_that_robot_only(server: ServerProcess, links: Path,
+                                             browser: Any) -> None:
+    rows = {row["name"]: row for row in csv.DictReader(links.open())}
     context = browser.new_context(viewport={"width": 1280, "height": 860})
     try:
         page = context.new_page()
         errors: list[str] = []
         page.on("pageerror", lambda error: errors.append(str(error)))
-        page.goto(f"{server.http_url}/robots/robot02/")
+        page.goto(rows["robot02"]["page"].replace("localhost", "127.0.0.1"))  # #token=...
         page.wait_for_selector('#conn-status[data-status="connected"]', timeout=15000)
+        assert "token" not in page.url  # taken out of the address bar, kept for the student
+        assert page.evaluate("localStorage.getItem('websim.robotToken:/robots/robot02/')") \
+            == rows["robot02"]["token"]
         assert page.input_value("#ws-url") == \
             f"ws://127.0.0.1:{server.ws_port}/robots/robot02"  # from its config.json
         page.click("#view")  # focus the page, not a field
@@ -94,5 +99,21 @@ def test_a_robots_admin_page_with_its_token_sets_that_robots_mass(server: Server
         wait_for(lambda: robot_state(server, "robot03")["mass_kg"] == 2.5, 10.0,
                  "robot03's mass to change", interval_s=0.2)
         assert robot_state(server, "robot01")["mass_kg"] == 1.2
+    finally:
+        context.close()
+
+
+def test_a_robots_page_without_its_token_watches_but_does_not_drive(server: ServerProcess,
+                                                                    browser: Any) -> None:
+    context = browser.new_context(viewport={"width": 1280, "height": 860})
+    try:
+        page = context.new_page()
+        page.goto(f"{server.http_url}/robots/robot01/")
+        page.wait_for_selector('#conn-status[data-status="connected"]', timeout=15000)
+        page.click("#view")
+        page.keyboard.down("ArrowUp")
+        time.sleep(1.0)
+        page.keyboard.up("ArrowUp")
+        assert robot_state(server, "robot01")["x"] == 0.0, "a classmate's page drove robot01"
     finally:
         context.close()

@@ -14,6 +14,7 @@ to the page's own server. Screenshots go to ``test-artifacts/`` (gitignored).
 from __future__ import annotations
 
 import contextlib
+import csv
 import itertools
 import json
 import time
@@ -105,8 +106,13 @@ class Client:
         self._stack.close()
 
 
-def robot_ws_url(server: ServerProcess, name: str) -> str:
-    return f"ws://127.0.0.1:{server.ws_port}/robots/{name}"
+def robot_ws_url(server: ServerProcess, name: str, token: str | None = None) -> str:
+    return f"ws://127.0.0.1:{server.ws_port}/robots/{name}" + (f"?token={token}" if token
+                                                                else "")
+
+
+TOKENS: dict[str, str] = {}
+"""The class's robot tokens, from its links file (the ``server`` fixture's)."""
 
 
 @contextlib.contextmanager
@@ -121,8 +127,10 @@ def client(url: str) -> Iterator[Client]:
 # --- The browser ---------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
-def server() -> Iterator[ServerProcess]:
-    running = start_server(["--class", str(CLASS_SIZE)])
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    links = tmp_path_factory.mktemp("dashboard") / "links.csv"
+    running = start_server(["--class", str(CLASS_SIZE), "--links", str(links)])
+    TOKENS.update({row["name"]: row["token"] for row in csv.DictReader(links.open())})
     yield running
     running.stop()
 
@@ -231,7 +239,7 @@ def test_every_robot_has_a_card_and_the_card_of_a_driven_robot_says_who(
         assert page.get_attribute('[data-robot="robot05"] [data-field=open]', "href") == \
             "/robots/robot05/"
 
-        with client(robot_ws_url(server, "robot03")) as student:
+        with client(robot_ws_url(server, "robot03", TOKENS["robot03"])) as student:
             student.drive(0.2)
 
             def robot03_driven() -> dict[str, str] | None:

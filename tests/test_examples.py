@@ -8,6 +8,7 @@ whether the robot was left standing.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 import re
@@ -247,3 +248,36 @@ def test_roslibjs_page_drives_the_robot_in_chromium(server: ServerProcess) -> No
     assert "y=0.000 m yaw=0.000 rad" in odom_text
     odom = standing_odom(server)
     assert 0.3 <= odom["pose"]["pose"]["position"]["x"] < 0.5
+
+
+# ---- a class robot, with its token (issue 20, section 4) -------------------------------------
+
+def test_the_snippets_drive_a_class_robot_with_its_token(tmp_path: Path) -> None:
+    """roslibpy and roslibjs reach ``ws://HOST:9090/robots/NAME?token=T`` and drive it; the
+    token is never printed."""
+    import csv
+
+    links = tmp_path / "links.csv"
+    server = start_server(["--class", "2", "--links", str(links)])
+    try:
+        token = {row["name"]: row["token"] for row in csv.DictReader(links.open())}["robot01"]
+        url = f"ws://127.0.0.1:{server.ws_port}/robots/robot01?token={token}"
+        commands = []
+        if importlib.util.find_spec("roslibpy") is not None:
+            commands.append([sys.executable, str(EXAMPLES / "course_snippets.py"), url])
+        if NODE is not None and ROSLIB.exists():
+            commands.append([NODE, str(EXAMPLES / "course_snippets.js"), url])
+        if not commands:
+            pytest.skip("neither roslibpy nor node with roslib installed")
+        for command in commands:
+            result = subprocess.run(command, capture_output=True, text=True,
+                                    timeout=RUN_TIMEOUT_S, check=False)
+            assert result.returncode == 0, result.stderr
+            assert "Connected to ROS 2 at ws://127.0.0.1" in result.stdout
+            assert token not in result.stdout + result.stderr
+            end = [match for match in ODOM_LINE.finditer(result.stdout) if match[1] == "end"]
+            assert end and float(end[0][4]) > 0.5, result.stdout  # it turned: it drove
+            robot = server.health()["robots"]["robot01"]
+            assert robot["last_driver"] is not None
+    finally:
+        server.stop()

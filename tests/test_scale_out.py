@@ -46,6 +46,11 @@ BROWSER_SKIP = skip_reason([WEB_DIR / "node_modules" / "roslib" / "build" / "ros
 needs_browser = pytest.mark.skipif(BROWSER_SKIP is not None, reason=BROWSER_SKIP or "")
 
 
+def token_of(name: str) -> str:
+    """Student ``name``'s token, as the roster gives it."""
+    return f"Token-of-{name}-2026"
+
+
 @dataclass
 class Proxy:
     http_port: int
@@ -57,7 +62,10 @@ class Proxy:
 def proxy(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Proxy]:
     directory = tmp_path_factory.mktemp("scale")
     roster = directory / "roster.txt"
-    roster.write_text("\n".join(NAMES + SPARES) + "\n")
+    # each worker keeps its own class secret: tokens the same whichever worker hosts a robot
+    # come from the roster (name,,token)
+    roster.write_text("\n".join(f"{name},,{token_of(name)}" for name in NAMES + SPARES)
+                      + "\n")
     http_port, ws_port = free_port(), free_port()
     workers = [start_server(["--class", str(roster), "--worker", "--public-ws-port",
                              str(ws_port)]) for _ in range(2)]
@@ -216,7 +224,7 @@ def test_the_dashboard_behind_nginx_shows_both_workers_and_resets_on_the_second(
     first, second = visit_all(proxy)
     assert first and second
     name = sorted(second)[0]
-    with connect_sync(f"ws://127.0.0.1:{proxy.ws_port}/robots/{name}",
+    with connect_sync(f"ws://127.0.0.1:{proxy.ws_port}/robots/{name}?token={token_of(name)}",
                       open_timeout=5) as student:  # drive it away from the spawn pose
         student.send(json.dumps({"op": "publish", "topic": "/cmd_vel",
                                  "type": "geometry_msgs/msg/Twist",

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import secrets
 import sys
 from collections.abc import Sequence
 
 from classroom import nginx_config
-from classroom.registry import Student
+from classroom.registry import Student, strong_token, weak_token
 from physics import MODES, ConfigError, Simulation, load_params, load_world
 from physics.params import SHIPPED_PARAMS_FILE
 from physics.world import WORLDS_DIR
@@ -113,7 +112,11 @@ def _run_robot_json(args: argparse.Namespace) -> int:
 
 
 def _run_serve(args: argparse.Namespace) -> int:
-    token = args.admin_token or secrets.token_urlsafe(16)
+    token = args.admin_token or strong_token()
+    weakness = weak_token(token)
+    if weakness is not None:
+        raise ConfigError(f"--admin-token is too weak: {weakness} (leave it out for a random "
+                          "one, printed at start)")
     limits, origins = serve_command.limits_from(args), serve_command.origins_from(args)
     clock = WallClock()  # the one clock of the server: every robot's, the class's
     if args.class_spec is None:

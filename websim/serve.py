@@ -14,9 +14,10 @@ import importlib.util
 import logging
 import math
 import os
+import re
 import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, MutableMapping
 from pathlib import Path
 from typing import Protocol
 
@@ -50,7 +51,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--http-port", type=int, default=8080,
                         help="web interface port (default 8080)")
     parser.add_argument("--admin-token", default=None,
-                        help="secret for admin rights (default: random, printed at start)")
+                        help="secret for admin rights (the instructor's, in a class): at least "
+                             "20 characters of A-Z a-z 0-9 . _ ~ -, mixing three of lower "
+                             "case, upper case, digits and symbols; a weaker one is refused "
+                             "(default: a random one, printed at start)")
     defaults = ClientLimits()
     parser.add_argument("--max-rate", type=_positive(float), default=defaults.max_rate,
                         metavar="N",
@@ -82,7 +86,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "NAME is at ws://HOST:9090/robots/NAME and "
                              "http://HOST:8080/robots/NAME/")
     parser.add_argument("--open-class", action="store_true",
-                        help="with --class: a new name enrols on its first connection")
+                        help="with --class: a new name enrols on its first connection, which "
+                             "is handed that robot's token (its page keeps it); nobody else "
+                             "can take the name afterwards")
+    parser.add_argument("--open-drive", action="store_true",
+                        help="with --class: any connection may drive and reset any robot "
+                             "(default: only with the robot's token or the instructor's; "
+                             "without one a connection may only watch)")
+    parser.add_argument("--state", default=None, metavar="FILE",
+                        help="with --class: the SQLite file keeping the class's secret, "
+                             "enrolments and each robot's parameters, pause and pose across "
+                             "restarts (default: ROSTER.websim-state.sqlite beside the roster; "
+                             "for --class N or a worker, in ~/.local/share/websim/)")
+    parser.add_argument("--fresh", action="store_true",
+                        help="with --class: start the class over: new secret (new robot "
+                             "tokens), no enrolments, every robot at its spawn pose")
     parser.add_argument("--max-robots", type=_positive(int), default=DEFAULT_MAX_ROBOTS,
                         metavar="N", help="most robots an open class holds (default "
                                           f"{DEFAULT_MAX_ROBOTS})")
@@ -197,9 +215,17 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
             print(f"  ROS 2:     node /NAME{NODE_NAME} per robot, topics under /NAME, "
                   f"frames NAME/odom, NAME/base_link, NAME/laser, on ROS_DOMAIN_ID {domain}",
                   flush=True)
+            print("  ROS 2:     any node in this ROS domain can reach every robot's topics "
+                  "(tokens guard only the WebSocket); discovery range "
+                  f"{os.environ.get(DISCOVERY_RANGE, 'SUBNET')}", flush=True)
     if args.host in ("0.0.0.0", "::"):
-        print("  listening on every network interface: anyone who can reach this machine can "
-              "drive the robot; only the admin token can change its parameters", flush=True)
+        if robot is not None or getattr(args, "open_drive", False):
+            print("  listening on every network interface: anyone who can reach this machine "
+                  "can drive the robots; only a token can change their parameters", flush=True)
+        else:
+            print("  listening on every network interface: anyone who can reach this machine "
+                  "can watch the robots; driving one needs its token (the links file)",
+                  flush=True)
         _print_lan_urls(args, robot is not None)
     if not (args.web_dir / "node_modules" / "roslib").is_dir():
         print(f"websim: warning: the page's libraries are not installed in {args.web_dir}; "
@@ -215,6 +241,7 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     websocket.close()
     await websocket.wait_closed()
     await http.close()
+    site.close()
     print("websim: stopped", flush=True)
     return 0
 
@@ -275,6 +302,8 @@ def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
         raise RuntimeError(f"--ros needs ROS 2's rclpy: {error} (pip install '.[ros]', "
                            "or source a ROS 2 installation)") from None
     runtime: RosRuntime | ClassRosRuntime
+    if site.classroom is not None:
+        localhost_only_discovery(os.environ)
     if site.robot is not None and isinstance(site.front, SimServer):
         runtime = RosRuntime(site.robot, site.front.bridge, loop,
                              site.front.host.schedule.writers)
@@ -287,6 +316,24 @@ def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
         runtime = ClassRosRuntime([(name, host.robot) for name, host in hosts], loop)
     runtime.start()
     return runtime
+
+
+DISCOVERY_RANGE = "ROS_AUTOMATIC_DISCOVERY_RANGE"
+"""ROS 2 (Iron and later): how far DDS discovery reaches."""
+
+
+def localhost_only_discovery(environ: MutableMapping[str, str]) -> None:
+    """A class's ROS graph stays on this machine unless the environment says otherwise.
+
+    Any node in the ROS domain can publish a robot's ``/NAME/cmd_vel``: the robots' tokens
+    guard the WebSocket only. Sets ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (and, for
+    Humble, ``ROS_LOCALHOST_ONLY=1``) when neither is set; export either to widen it.
+    """
+    if DISCOVERY_RANGE in environ or "ROS_LOCALHOST_ONLY" in environ:
+        return
+    environ[DISCOVERY_RANGE] = "LOCALHOST"
+    if environ.get("ROS_DISTRO") == "humble":
+        environ["ROS_LOCALHOST_ONLY"] = "1"
 
 
 async def _poll_graph(ros: RosGraph) -> None:
@@ -305,10 +352,43 @@ def _port_error(what: str, host: str, port: int, error: OSError) -> int:
     return 1
 
 
+TOKEN_IN_TEXT = re.compile(r"(token=)[^&\s'\"#]+", re.IGNORECASE)
+"""A token in a URL or query (``?token=...``, ``&token=...``) as any log line may quote it."""
+
+
+class RedactTokens(logging.Filter):
+    """Takes tokens out of every log line, at every level.
+
+    ``websockets`` logs the request line ``GET /?token=...`` at debug: ``token=`` values and
+    the known secrets are replaced before any handler writes the line.
+    """
+
+    def __init__(self, secrets: tuple[str, ...] = ()) -> None:
+        super().__init__()
+        self.secrets = tuple(secret for secret in secrets if secret)
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        """Redact the record in place; always keep it."""
+        text = record.getMessage()
+        redacted = TOKEN_IN_TEXT.sub(r"\1<redacted>", text)
+        for secret in self.secrets:
+            redacted = redacted.replace(secret, "<redacted>")
+        if redacted != text:
+            record.msg, record.args = redacted, None
+        return True
+
+
+def redact_tokens(*secrets: str) -> None:
+    """Install ``RedactTokens`` on every handler of the root logger."""
+    for handler in logging.getLogger().handlers:
+        handler.addFilter(RedactTokens(secrets))
+
+
 def run(args: argparse.Namespace, site: Site, token: str) -> int:
     """Entry point of ``websim serve`` after the robots were built."""
     logging.basicConfig(level=args.log_level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    redact_tokens(token)
     if args.event_loop == "uvloop":
         if importlib.util.find_spec("uvloop") is None:
             print("websim: error: --event-loop uvloop: uvloop is not installed "

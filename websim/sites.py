@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import json
+import os
 import socket
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -19,13 +21,13 @@ from classroom.class_server import ClassServer
 from classroom.registry import (
     Classroom,
     Student,
-    derived_token,
     numbered_roster,
     read_roster,
 )
+from classroom.state import ClassState, class_identity, default_state_path
 from physics import ConfigError, LidarParams, RobotParams
 from ros_nodes.robot_description import robot_json
-from ros_nodes.robot_host import RobotHost
+from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
 from ros_nodes.robot_interface import ROBOTS_PREFIX
 from ros_nodes.robot_server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
@@ -54,6 +56,12 @@ class Site:
     ws_port: int = 9090
     classroom: Classroom | None = None
     new_robot_json: str | None = None
+
+    def close(self) -> None:
+        """Save a class's state and release its file (at shutdown)."""
+        if self.classroom is not None and self.classroom.state is not None:
+            self.classroom.save()
+            self.classroom.state.close()
 
     def class_hosts(self) -> list[tuple[str, RobotHost]]:
         """The robots of a class, by name (none for a single robot)."""
@@ -89,8 +97,12 @@ class Site:
                 return self.new_robot_json
             return robot_json(host.robot.sim.params, host.robot.sim.lidar.params)
         url = f"ws://{_url_name(hostname)}:{self.ws_port}{ROBOTS_PREFIX}{robot}"
-        return json.dumps({"about": f"robot {robot} of this class, filled by websim serve",
-                           "ws": url, "adminWs": url})
+        config: dict[str, object] = {"about": f"robot {robot} of this class, filled by websim "
+                                              "serve", "ws": url, "adminWs": url}
+        if self.classroom is not None and self.classroom.open_class:
+            # the service that hands a newly enrolled robot's token to its first connection
+            config["robotToken"] = {"name": TOKEN_SERVICE, "type": "websim/srv/RobotToken"}
+        return json.dumps(config)
 
 
 def single_robot(robot: VirtualRobot, token: str, limits: ClientLimits,
@@ -127,7 +139,8 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
         args: the options of ``websim serve``.
         make_robot: builds a student's robot (with ``clock``).
         new_robot_params: the robot and LiDAR a new robot gets (its ``robot.json``).
-        token: the instructor's token (each robot's is derived from it).
+        token: the instructor's token (robots' tokens derive from the class's own secret,
+            kept in its state file: ``--state``, ``--fresh``).
         limits: the bounds every client lives within.
         origins: which web pages may connect.
         clock: the server's one clock, the robots' too. Default: wall time.
@@ -135,20 +148,35 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
     Raises:
         ConfigError: a bad roster or world (the message names the file and line).
     """
-    classroom = Classroom(class_roster(args.class_spec), make_robot,
-                          open_class=args.open_class, max_robots=args.max_robots,
-                          idle_pause_s=args.idle_pause,
-                          make_token=lambda name: derived_token(token, name),
-                          lazy=args.worker, clock=clock)
-    site = Site(ClassServer(classroom, token, limits=limits, origins=origins),
+    roster = class_roster(args.class_spec)
+    state_path = Path(args.state) if getattr(args, "state", None) else default_state_path(
+        args.class_spec, args.ws_port if args.worker else None)
+    state = ClassState(state_path, class_identity(args.class_spec),
+                       fresh=getattr(args, "fresh", False))
+    try:
+        classroom = Classroom(roster, make_robot, open_class=args.open_class,
+                              max_robots=args.max_robots, idle_pause_s=args.idle_pause,
+                              lazy=args.worker, clock=clock, state=state)
+    except BaseException:
+        state.close()
+        raise
+    open_drive = getattr(args, "open_drive", False)
+    site = Site(ClassServer(classroom, token, limits=limits, origins=origins,
+                            open_drive=open_drive),
                 ws_port=args.public_ws_port or args.ws_port, classroom=classroom,
                 new_robot_json=robot_json(*new_robot_params))
     names = list(classroom.students)
     notes = [note for note, wanted in (("new names enrol (open class)", args.open_class),
                                        ("a worker: a robot is made when first routed here",
                                         args.worker)) if wanted]
-    site.banner.append(f"class:     {len(names)} robots ({names[0]} ... {names[-1]}), each at "
+    if open_drive:
+        notes.append("anyone may drive any robot (--open-drive)")
+    first, last = (names[0], names[-1]) if names else ("none yet", "none yet")
+    site.banner.append(f"class:     {len(names)} robots ({first} ... {last}), each at "
                        f"{ROBOTS_PREFIX}NAME/ on both ports" + "".join(f"; {n}" for n in notes))
+    site.banner.append(f"state:     {state.path} ("
+                       + ("restored: robots as they were, same tokens" if state.restored
+                          else "new: saved every few seconds; --fresh starts over") + ")")
     if args.links is not None:
         write_links(Path(args.links), classroom, public_host(args.host),
                     args.public_http_port or args.http_port, site.ws_port)
@@ -168,21 +196,47 @@ def write_links(path: Path, classroom: Classroom, host: str, http_port: int,
                 ws_port: int) -> None:
     """The instructor's hand-out: one row per robot (name, page, admin page, WebSocket, token).
 
+    The page URL carries the robot's token in its fragment (``#token=``: never sent to a
+    server; the page keeps it and takes it out of the address bar). Written atomically (a
+    temporary file renamed over it) with mode 0600; a symbolic link at ``path`` is refused,
+    never written through.
+
     Raises:
-        ConfigError: the file cannot be written.
+        ConfigError: the file cannot be written, or ``path`` is a symbolic link.
     """
     name_in_url = _url_name(host)
+    text = io.StringIO(newline="")
+    writer = csv.writer(text)
+    writer.writerow(["name", "page", "admin_page", "websocket", "token"])
+    for name in classroom.students:
+        token = classroom.token(name)
+        page = f"http://{name_in_url}:{http_port}{ROBOTS_PREFIX}{name}/"
+        writer.writerow([name, f"{page}#token={token}", f"{page}admin?token={token}",
+                         f"ws://{name_in_url}:{ws_port}{ROBOTS_PREFIX}{name}", token])
+    write_private(path, text.getvalue(), "--links")
+
+
+def write_private(path: Path, text: str, what: str) -> None:
+    """Write ``text`` to ``path`` atomically, mode 0600, never through a symbolic link.
+
+    Raises:
+        ConfigError: ``path`` is a symbolic link, or the file cannot be written.
+    """
+    if path.is_symlink():
+        raise ConfigError(f"{what} {path}: is a symbolic link; websim writes tokens only to "
+                          "a file of its own (remove the link or name another file)")
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        with path.open("w", newline="", encoding="utf-8") as stream:
-            writer = csv.writer(stream)
-            writer.writerow(["name", "page", "admin_page", "websocket", "token"])
-            for name in classroom.students:
-                token = classroom.token(name)
-                page = f"http://{name_in_url}:{http_port}{ROBOTS_PREFIX}{name}/"
-                writer.writerow([name, page, f"{page}admin?token={token}",
-                                 f"ws://{name_in_url}:{ws_port}{ROBOTS_PREFIX}{name}", token])
+        descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW,
+                             0o600)
+        with os.fdopen(descriptor, "w", encoding="utf-8", newline="") as stream:
+            stream.write(text)
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(temporary, path)
     except OSError as error:
-        raise ConfigError(f"--links {path}: cannot write: {error.strerror}") from None
+        temporary.unlink(missing_ok=True)
+        raise ConfigError(f"{what} {path}: cannot write: {error.strerror}") from None
 
 
 def _url_name(hostname: str) -> str:

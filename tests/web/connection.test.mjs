@@ -6,7 +6,7 @@ import { test } from 'node:test';
 import {
   Connection, defaultWsUrl, initialWsUrl, linkedWsUrl, loadSiteConfig, ownWsUrl, resolveWsUrl,
   retryDelayMs, RETRY_MAX_MS, sameBridge, ServiceCallError, takeToken, tokenFor, TOKEN_KEY,
-  withoutToken, withPageBridge, withToken,
+  withoutToken, withPageBridge, withToken, keepRobotToken, ROBOT_TOKEN_PREFIX, takeRobotToken,
 } from '../../web-interface/js/connection.js';
 import { fakeRoslib } from './fake-roslib.mjs';
 
@@ -231,4 +231,24 @@ test('a URL the browser cannot parse is an error, not a retry loop', () => {
   connection.connect();
   assert.equal(connection.status, 'error');
   assert.match(connection.message, /"nonsense" is not a WebSocket URL/);
+});
+
+test('a robot page keeps its #token= per robot, out of the address bar; ?token= too', () => {
+  const stored = new Map();
+  const storage = { setItem: (k, v) => stored.set(k, v), getItem: (k) => stored.get(k) ?? null };
+  const replaced = [];
+  const history = { replaceState: (s, t, url) => replaced.push(String(url)) };
+  const alice = 'http://h:8080/robots/alice/';
+  assert.equal(takeRobotToken({ href: `${alice}#token=Abc-123` }, history, storage), 'Abc-123');
+  assert.equal(stored.get(`${ROBOT_TOKEN_PREFIX}/robots/alice/`), 'Abc-123');
+  assert.deepEqual(replaced, [alice]);
+  assert.equal(takeRobotToken({ href: alice }, history, storage), 'Abc-123');
+  assert.equal(replaced.length, 1, 'nothing to strip: the address bar is left alone');
+  assert.equal(takeRobotToken({ href: 'http://h:8080/robots/bob/' }, history, storage), '',
+    "alice's token is not bob's");
+  assert.equal(takeRobotToken({ href: 'http://h:8080/robots/bob/?token=B0b&ws=x' }, history,
+    storage), 'B0b');
+  assert.equal(replaced.at(-1), 'http://h:8080/robots/bob/?ws=x');
+  keepRobotToken({ href: 'http://h:8080/robots/dave/' }, storage, 'D4ve');
+  assert.equal(takeRobotToken({ href: 'http://h:8080/robots/dave/' }, history, storage), 'D4ve');
 });

@@ -136,6 +136,35 @@ export function takeToken(location, history, storage) {
   return storage.getItem(TOKEN_KEY) ?? '';
 }
 
+/** Where a class robot's page keeps its robot's token: localStorage, per robot page path. */
+export const ROBOT_TOKEN_PREFIX = 'websim.robotToken:';
+
+/**
+ * The robot's token a student's page holds: from the links file's #token= (or ?token=), then
+ * kept in `storage` under the page's path and taken out of the address bar (and so out of
+ * any Referer and bookmark), else what `storage` kept for this robot; '' without one.
+ */
+export function takeRobotToken(location, history, storage) {
+  const address = new URL(location.href);
+  const hash = new URLSearchParams(address.hash.replace(/^#/, ''));
+  const fromUrl = hash.get('token') || address.searchParams.get('token');
+  const key = ROBOT_TOKEN_PREFIX + address.pathname;
+  if (fromUrl) {
+    storage.setItem(key, fromUrl);
+    address.searchParams.delete('token');
+    hash.delete('token');
+    const rest = hash.toString();
+    address.hash = rest ? `#${rest}` : '';
+    history.replaceState(null, '', address);
+  }
+  return storage.getItem(key) ?? '';
+}
+
+/** Keep `token` as this robot page's token (an open class handed it to this page). */
+export function keepRobotToken(location, storage, token) {
+  storage.setItem(ROBOT_TOKEN_PREFIX + new URL(location.href).pathname, token);
+}
+
 /** `url` with any token= parameter removed: what may be shown or logged. */
 export function withoutToken(url) {
   return url.replace(/([?&])token=[^&#]*(&?)/, (match, sep, next) => (next ? sep : ''))

@@ -1,7 +1,9 @@
 // The student page: the view, teleop, readouts, live plots and the heading PID panel.
 
 import { ROSLIB } from './vendor.js';
-import { Connection, initialWsUrl, loadSiteConfig } from './connection.js';
+import {
+  Connection, initialWsUrl, keepRobotToken, loadSiteConfig, ownWsUrl, takeRobotToken,
+} from './connection.js';
 import { bindConnectionBar, runFrameLoop } from './connection-bar.js';
 import { createState } from './state.js';
 import { LivePlots } from './plots.js';
@@ -17,7 +19,25 @@ async function main() {
   const [config, robot] = await Promise.all([loadSiteConfig(), robotDescription()]);
   if (!robot) return;
   const state = createState();
-  const connection = new Connection(ROSLIB, { url: initialWsUrl(window.location, config.ws) });
+  // A class robot's token (the links file's #token=, or what an open class handed this page):
+  // kept in localStorage, sent only to the page's own bridge, never shown.
+  const token = takeRobotToken(window.location, window.history, window.localStorage);
+  const connection = new Connection(ROSLIB, {
+    url: initialWsUrl(window.location, config.ws), token,
+    tokenUrl: ownWsUrl(window.location, config.ws),
+  });
+  if (!token && config.robotToken) {
+    // An open class: the first connection to a new name is handed its robot. Ask once.
+    connection.addEventListener('connected', () => {
+      if (connection.token) return;
+      connection.callService(config.robotToken.name, config.robotToken.type).then((reply) => {
+        if (reply && typeof reply.token === 'string' && reply.token) {
+          keepRobotToken(window.location, window.localStorage, reply.token);
+          connection.token = reply.token; // sent from the next (re)connection on
+        }
+      }).catch(() => {}); // not this page's robot: it watches
+    });
+  }
   const bar = bindConnectionBar(connection, {
     form: $('#connect-form'), input: $('#ws-url'), status: $('#conn-status'),
     message: $('#view-message'), otherDriver: $('#other-driver'),

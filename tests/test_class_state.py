@@ -1,0 +1,189 @@
+"""A class's state survives a restart (issue 20, section 9).
+
+The class keeps its secret, enrolments and each robot's parameters, pause and pose in one
+SQLite file (``--state``); a restart of the same command brings every robot back and every
+token the same; a file of another class, of a newer schema, locked or corrupt is refused
+with the reason; ``--fresh`` starts over. The slow test kills a real server with SIGKILL while
+20 robots are driven.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import csv
+import json
+import math
+import signal
+import sqlite3
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+import websockets
+
+from classroom.registry import Classroom, Student
+from classroom.state import SAVE_INTERVAL_S, SCHEMA_VERSION, ClassState, class_identity
+from physics import ConfigError, Simulation, load_world
+from ros_nodes.virtual_robot_core import VirtualRobot
+from websim import cli
+
+from server_process import ADMIN_TOKEN, start_server, stop_process, wait_for
+
+IDENTITY = "roster:/class/roster.txt"
+
+
+def make_robot(student: Student) -> VirtualRobot:
+    return VirtualRobot(Simulation(load_world("empty")))
+
+
+def test_a_classroom_comes_back_as_it_was_with_the_same_tokens(tmp_path: Path) -> None:
+    path = tmp_path / "state.sqlite"
+    roster = [Student("alice"), Student("bob")]
+    state = ClassState(path, IDENTITY)
+    before = Classroom(roster, make_robot, open_class=True, idle_pause_s=None, state=state)
+    assert before.get("dave") is not None and before.claim("dave")
+    assert before.get("erin") is not None  # enrolled, not yet handed to anyone
+    alice = dict(before)["alice"]
+    alice.robot.parameters.set_many({"mode": "dynamic", "mass_kg": 2.5})
+    alice.robot.sim.command(0.3, 0.4)
+    alice.robot.sim.step(40)
+    alice.held = True
+    pose, odometry = alice.robot.sim.ground_truth(), alice.robot.sim.odometry()
+    tokens = {name: before.token(name) for name in ("alice", "bob", "dave", "erin")}
+    before.save()
+    state.close()
+
+    state = ClassState(path, IDENTITY)
+    assert state.restored
+    after = Classroom(roster, make_robot, open_class=True, idle_pause_s=None, state=state)
+    assert {name: after.token(name) for name in tokens} == tokens
+    assert set(dict(after)) == {"alice", "bob", "dave", "erin"}
+    assert after.unclaimed == {"erin"} and not after.claim("dave")
+    restored = dict(after)["alice"]
+    assert restored.robot.sim.mode == "dynamic" and restored.robot.sim.params.mass_kg == 2.5
+    assert restored.held
+    again = restored.robot.sim.ground_truth()
+    assert (again.x, again.y, again.theta) == pytest.approx((pose.x, pose.y, pose.theta))
+    odom = restored.robot.sim.odometry()
+    assert (odom.x, odom.y, odom.theta) == pytest.approx((odometry.x, odometry.y,
+                                                          odometry.theta))
+    state.close()
+
+
+def test_another_class_a_newer_schema_a_locked_or_corrupt_file_are_refused(
+        tmp_path: Path) -> None:
+    path = tmp_path / "state.sqlite"
+    ClassState(path, IDENTITY).close()
+    with pytest.raises(ConfigError, match="this file holds another class"):
+        ClassState(path, "robots:20")
+
+    held = ClassState(path, IDENTITY)
+    with pytest.raises(ConfigError, match="another websim serve is using this class's state"):
+        ClassState(path, IDENTITY)
+    held.close()
+
+    db = sqlite3.connect(path)
+    with db:
+        db.execute("UPDATE meta SET value = ? WHERE key = 'schema'", (str(SCHEMA_VERSION + 1),))
+    db.close()
+    with pytest.raises(ConfigError, match="written by a newer websim"):
+        ClassState(path, IDENTITY)
+
+    corrupt = tmp_path / "corrupt.sqlite"
+    corrupt.write_bytes(b"this is no database" * 100)
+    with pytest.raises(ConfigError, match="corrupt"):
+        ClassState(corrupt, IDENTITY)
+    assert corrupt.read_bytes() == b"this is no database" * 100, "nothing silently lost"
+
+    fresh = ClassState(path, IDENTITY, fresh=True)  # deliberately starts over
+    assert not fresh.restored
+    fresh.close()
+
+
+def test_serve_names_the_problem_with_a_state_file(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    state = tmp_path / "state.sqlite"
+    ClassState(state, class_identity("7")).close()
+    assert cli.main(["serve", "--class", "3", "--state", str(state),
+                     "--admin-token", ADMIN_TOKEN]) == 2
+    assert "this file holds another class (robots:7, not robots:3)" in capsys.readouterr().err
+
+
+# ---- a real server killed with SIGKILL while 20 robots are driven ------------------------------
+
+ROBOTS = 20
+
+
+async def drive_all(ws_port: int, tokens: dict[str, str], seconds: float) -> None:
+    """Each robot driven by its owner at its own speed, at 10 Hz, for ``seconds``."""
+    async def drive(index: int, name: str) -> None:
+        url = f"ws://127.0.0.1:{ws_port}/robots/{name}?token={tokens[name]}"
+        twist = {"linear": {"x": 0.05 + 0.01 * index}, "angular": {"z": 0.2}}
+        async with websockets.connect(url) as ws:
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                await ws.send(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": twist}))
+                await asyncio.sleep(0.1)
+
+    await asyncio.gather(*(drive(index, name) for index, name in enumerate(tokens)))
+
+
+async def poses(ws_port: int, names: list[str]) -> dict[str, tuple[float, float, float]]:
+    """Each robot's true pose (x, y, yaw), watched without a token."""
+    async def one(name: str) -> tuple[float, float, float]:
+        async with websockets.connect(f"ws://127.0.0.1:{ws_port}/robots/{name}") as ws:
+            await ws.send(json.dumps({"op": "subscribe", "topic": "/ground_truth"}))
+            while True:
+                message: dict[str, Any] = json.loads(await asyncio.wait_for(ws.recv(), 5))
+                if message.get("topic") == "/ground_truth":
+                    pose = message["msg"]["pose"]["pose"]
+                    q = pose["orientation"]
+                    return (pose["position"]["x"], pose["position"]["y"],
+                            2.0 * math.atan2(q["z"], q["w"]))
+
+    found = await asyncio.gather(*(one(name) for name in names))
+    return dict(zip(names, found, strict=True))
+
+
+@pytest.mark.slow
+def test_a_class_killed_with_sigkill_comes_back_within_the_save_interval(
+        tmp_path: Path) -> None:
+    state, links = tmp_path / "class.sqlite", tmp_path / "links.csv"
+    command = ["--class", str(ROBOTS), "--state", str(state), "--links", str(links),
+               "--idle-pause", "3600"]
+    server = start_server(command)
+    tokens = {row["name"]: row["token"] for row in csv.DictReader(links.open())}
+    assert len(tokens) == ROBOTS
+    try:
+        asyncio.run(drive_all(server.ws_port, tokens, 4.0))
+        time.sleep(SAVE_INTERVAL_S + 0.5)  # stopped robots: a save has seen them still
+        before = asyncio.run(poses(server.ws_port, list(tokens)))
+        # and drive again, killing the server mid-drive
+        driving = asyncio.new_event_loop()
+        task = driving.create_task(drive_all(server.ws_port, tokens, 30.0))
+        driving.run_until_complete(asyncio.sleep(1.0 + SAVE_INTERVAL_S))
+        stop_process(server.process, server.output, signal.SIGKILL)
+        with pytest.raises((OSError, websockets.ConnectionClosed)):
+            driving.run_until_complete(task)
+        driving.close()
+    finally:
+        if server.process.poll() is None:
+            stop_process(server.process, server.output, signal.SIGKILL)
+    assert server.process.returncode == -signal.SIGKILL
+
+    links.unlink()
+    again = start_server(command, ws_port=server.ws_port, http_port=server.http_port)
+    try:
+        assert {row["name"]: row["token"] for row in csv.DictReader(links.open())} == tokens
+        after = asyncio.run(poses(again.ws_port, list(tokens)))
+        top_speed = 0.05 + 0.01 * (ROBOTS - 1)
+        for name in tokens:
+            moved = math.dist(before[name][:2], after[name][:2])
+            assert moved > 0.0, f"{name}: the drive before the kill was saved"
+            # driven at most 1 s + the save interval + a tick before the kill, at most this far
+            assert moved <= top_speed * (1.0 + 2 * SAVE_INTERVAL_S) + 0.05, name
+        wait_for(lambda: again.health()["robot_count"] == ROBOTS, 5.0, "every robot back")
+    finally:
+        again.stop()
+    assert "restored: robots as they were, same tokens" in "".join(again.output)
