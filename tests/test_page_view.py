@@ -14,10 +14,11 @@ from page_helpers import (
     open_page,
     page_url,
     reset_robot,
+    screenshot,
     wait_connected,
 )
 
-from server_process import ServerProcess, wait_for
+from server_process import ServerProcess, start_server, wait_for
 
 SCAN_RGB = (225, 29, 72)
 """view.js COLORS.scan (#e11d48)."""
@@ -132,3 +133,35 @@ def test_a_turning_robots_scan_is_drawn_on_the_walls(server: ServerProcess, brid
         context.close()
     assert len(samples) >= 8, samples
     assert min(samples) >= 0.9, samples
+
+
+@needs_browser
+def test_while_the_bridge_is_down_the_view_keeps_the_last_world_and_says_it_is_stale(
+        browser: Any) -> None:
+    """The ground truth stops with the bridge: the view keeps the map frame, its walls and
+    its zoom, and says the picture is stale, instead of re-zooming onto odometry alone."""
+    server = start_server()
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    try:
+        page, log = open_page(context, page_url(server))
+        wait_connected(page)
+        live = wait_for(lambda: (b := _pixel_boxes(page))["wall"]["n"] > 300 and b,
+                        timeout_s=10, what="the walls on the canvas")["wall"]
+        scale = page.evaluate("window.websim.view.camera.scale")
+        assert page.is_hidden("#view-stale")
+        server.stop()
+        page.wait_for_selector('#conn-status:is([data-status="closed"], [data-status="error"],'
+                               ' [data-status="connecting"])', timeout=10000)
+        page.wait_for_timeout(2500)  # ground truth is stale after 1 s
+        down = _pixel_boxes(page)["wall"]
+        assert down["n"] > 0.9 * live["n"], (live, down)
+        assert (down["x0"], down["y0"], down["x1"], down["y1"]) == (
+            live["x0"], live["y0"], live["x1"], live["y1"])
+        assert page.evaluate("window.websim.view.camera.scale") == scale
+        note = page.wait_for_selector("#view-stale:not([hidden])", timeout=2000)
+        assert "stale" in (note.text_content() or "").lower()
+        screenshot(page, "main-bridge-down.png", full_page=False)
+        assert log.page_errors == []
+    finally:
+        context.close()
+        server.stop()

@@ -4,8 +4,9 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  createState, displayPose, historyCsv, HISTORY_S, noteOwnReset, notePose, onGroundTruth, onOdometry, onWorld,
-  POSE_HISTORY_S, poseAt, rateHz, RESET_SHOW_MS, resetByOther, TRUTH_STALE_MS, unwrapDeg,
+  createState, displayPose, historyCsv, HISTORY_S, noteLinkDown, noteLinkUp, noteOwnReset, notePose,
+  onGroundTruth, onOdometry, onWorld, POSE_HISTORY_S, poseAt, rateHz, RESET_SHOW_MS, resetByOther,
+  shownAtMs, TRUTH_STALE_MS, unwrapDeg,
 } from '../../web-interface/js/state.js';
 
 function odometry(x, y, stampS, frame = 'odom') {
@@ -122,4 +123,17 @@ test('the heading is unwrapped across ±180°, the setpoint on the heading\'s tu
   assert.equal(csv[0], 'stamp_s,v_cmd_mps,v_mps,omega_cmd_rps,omega_rps,heading_deg,setpoint_deg');
   assert.equal(csv.length, 5);
   assert.equal(csv[1].split(',')[0], '10');
+});
+
+test('while the bridge is down the picture stays as it was: ground truth, its map frame', () => {
+  const state = createState();
+  onOdometry(state, odometry(1, 0, 10), 0);
+  onGroundTruth(state, odometry(1.1, 0, 10, 'map'), 0);
+  noteLinkDown(state, 100);
+  const later = 100 + 10 * TRUTH_STALE_MS;
+  assert.equal(shownAtMs(state, later), 100);
+  assert.equal(displayPose(state, shownAtMs(state, later)).frame, 'map');
+  assert.equal(displayPose(state, later).frame, 'odom'); // what the view used to fall back to
+  noteLinkUp(state);
+  assert.equal(shownAtMs(state, later), later);
 });

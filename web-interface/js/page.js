@@ -4,7 +4,8 @@
 
 import { missingLibraries, nipplejs } from './vendor.js';
 import {
-  clearTrail, onCommand, onGroundTruth, onOdometry, onScan, onTfStatic, onWorld,
+  clearTrail, noteLinkDown, noteLinkUp, onCommand, onGroundTruth, onOdometry, onScan, onTfStatic,
+  onWorld,
 } from './state.js';
 import { twistValues } from './ros-msgs.js';
 import { noteCommand, noteOwnCommand } from './drivers.js';
@@ -43,14 +44,19 @@ export function subscribeRobot(connection, state, robot) {
     const { linear, angular } = twistValues(msg);
     noteCommandSent(state.latency, linear, angular, now());
   });
-  connection.addEventListener('connected', () => clearTrail(state));
+  connection.addEventListener('connected', () => {
+    clearTrail(state);
+    noteLinkUp(state);
+  });
+  connection.addEventListener('disconnected', () => noteLinkDown(state, now()));
 }
 
-/** A view with its follow and reset buttons. */
+/** A view with its follow and reset buttons, and its note that the picture is stale. */
 export function createView(state, robot) {
   const follow = $('#follow');
   const view = new View($('#view'), state, robot, {
     onFollowChange: (on) => follow.setAttribute('aria-pressed', String(on)),
+    staleNote: $('#view-stale'),
   });
   follow.addEventListener('click', () => view.setFollow(!view.follow));
   $('#reset-view').addEventListener('click', () => view.resetView());

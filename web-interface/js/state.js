@@ -52,7 +52,27 @@ export function createState() {
     latency: createLatency(), // the page's commands until odometry shows them (latency.js)
     jumpAtMs: -Infinity, // when the shown pose last jumped (a reset): the trail breaks there
     ownResetAtMs: -Infinity, // when this page last asked for a reset
+    linkDownAtMs: null, // when the bridge went away (null while connected): the view freezes
   };
+}
+
+/** The bridge went away at nowMs: what the page shows is as of then, and stale. */
+export function noteLinkDown(state, nowMs) {
+  state.linkDownAtMs = nowMs;
+}
+
+/** The bridge is back: the page shows live data again. */
+export function noteLinkUp(state) {
+  state.linkDownAtMs = null;
+}
+
+/**
+ * The time (ms) the page's picture is of: now, or while the bridge is down the moment it
+ * went away, so that the world, the pose and its frame stay as they were last seen instead
+ * of ground truth going stale and the view falling back to odometry without walls.
+ */
+export function shownAtMs(state, nowMs) {
+  return state.linkDownAtMs === null ? nowMs : Math.min(nowMs, state.linkDownAtMs);
 }
 
 /** Notes a stamped pose of `frame`; keeps the last POSE_HISTORY_S of them (by stamp). */

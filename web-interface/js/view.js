@@ -4,9 +4,10 @@
 // pixels (y down). worldToScreen() is the one place that scales and flips y. The backing
 // store has devicePixelRatio pixels per CSS pixel so lines stay crisp on HiDPI screens. Static
 // walls are drawn once into an offscreen layer (again only when the world or the zoom changes)
-// and copied each frame.
+// and copied each frame. While the bridge is down the view keeps the last picture (frame,
+// walls, zoom) and its stale note says how old it is.
 
-import { displayPose, poseAt, TRAIL_S } from './state.js';
+import { displayPose, poseAt, shownAtMs, TRAIL_S } from './state.js';
 import { composePose } from './ros-msgs.js';
 
 const WHEEL_WIDTH_M = 0.025; // drawn only: the model has no wheel width
@@ -42,9 +43,10 @@ export class View {
    * @param {HTMLCanvasElement} canvas
    * @param {object} state from state.js
    * @param {object} robot the robot description (robot.js): footprint, wheelbase, wheels
-   * @param {{onFollowChange?: (follow: boolean) => void}} [options]
+   * @param {{onFollowChange?: (follow: boolean) => void, staleNote?: HTMLElement}} [options]
+   *   staleNote: shown, saying how old the picture is, while the bridge is down
    */
-  constructor(canvas, state, robot, { onFollowChange = () => {} } = {}) {
+  constructor(canvas, state, robot, { onFollowChange = () => {}, staleNote = null } = {}) {
     this.canvas = canvas;
     this.ctx = canvas.getContext('2d');
     this.state = state;
@@ -54,6 +56,7 @@ export class View {
       wheelDiameter: 2 * robot.robot.wheel_radius_m,
     };
     this.onFollowChange = onFollowChange;
+    this.staleNote = staleNote;
     this.camera = { x: 0, y: 0, scale: 80 }; // world point at the centre; px per m
     this.follow = false;
     this.userMoved = false; // until the user pans or zooms, the view fits the world itself
@@ -102,12 +105,14 @@ export class View {
   draw(nowMs) {
     this._resize();
     const { ctx, state } = this;
-    const { pose, frame } = displayPose(state, nowMs);
+    const atMs = shownAtMs(state, nowMs); // while the bridge is down: as it was last seen
+    const stale = atMs < nowMs;
+    const { pose, frame } = displayPose(state, atMs);
     if (this.follow && pose) {
       this.camera.x = pose.x;
       this.camera.y = pose.y;
     } else if (!this.userMoved) {
-      this._fit(nowMs);
+      this._fit(atMs);
     }
     ctx.setTransform(this.dpr, 0, 0, this.dpr, 0, 0);
     ctx.fillStyle = COLORS.background;
@@ -115,13 +120,24 @@ export class View {
     this._drawGrid();
     if (frame !== 'odom') this._drawWalls(); // walls are in map: they need ground truth
     this._drawAxes();
-    this._drawTrail(nowMs);
+    this._drawTrail(atMs);
     if (pose) {
       this._drawScan(poseAt(state, frame, state.scan?.stampS) ?? pose);
       this._drawRobot(pose);
     }
     this._drawScaleBar();
     this._drawFrameLabel(frame);
+    this._showStale(stale && (pose || state.worldBounds) ? nowMs - atMs : null);
+  }
+
+  /** The stale note: how old the picture is (ms), or null to hide it. Whole seconds. */
+  _showStale(ageMs) {
+    const note = this.staleNote;
+    if (!note) return;
+    const text = ageMs === null ? ''
+      : `Stale: the last picture from the bridge, ${Math.floor(ageMs / 1000)} s old`;
+    if (note.textContent !== text) note.textContent = text;
+    if (note.hidden !== !text) note.hidden = !text;
   }
 
   _fit(nowMs) {
