@@ -12,6 +12,7 @@ from __future__ import annotations
 import pytest
 from bridge_rig import Rig
 
+from rosbridge.core.capabilities.services import MAX_PENDING_CALLS_PER_CLIENT
 from rosbridge.core.limits import ClientLimits
 from rosbridge.core.relay import RECEIVER_ROOM_SHARE
 
@@ -106,3 +107,16 @@ def test_a_flood_of_large_goals_is_refused_at_its_sender(rig: Rig) -> None:
     assert results and all(f["result"] is False for f in results)
     assert any("bytes/s relayed to other clients" in f["values"] for f in results)
     assert server.outbox.overflowed is None
+
+
+def test_calls_waiting_for_a_provider_are_bounded_per_caller_and_forgotten_with_it(
+        rig: Rig) -> None:
+    provider, caller = rig.client(), rig.client()
+    rig.send(provider, {"op": "advertise_service", "service": "/slow", "type": "my_pkg/Slow"})
+    for number in range(MAX_PENDING_CALLS_PER_CLIENT + 6):
+        rig.send(caller, {"op": "call_service", "service": "/slow", "id": number, "args": {}})
+    refused = failures(rig.drain(caller))
+    assert len(refused) == 6 and all("calls waiting for an answer" in r for r in refused)
+    rig.bridge.disconnect(caller)
+    services = rig.bridge.services
+    assert not services._pending and not services._by_caller and not services._by_service

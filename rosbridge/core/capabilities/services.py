@@ -25,6 +25,14 @@ log = logging.getLogger("websim.bridge")
 SERVICE_TIMEOUT_S = 5.0
 """How long a call to a client-provided service may wait for its answer."""
 
+MAX_PENDING_CALLS_PER_CLIENT = 64
+"""Calls to client-provided services one client may have waiting at once; past it a call
+fails at once (browsers wait for each answer; 64 is a burst of a whole page's calls)."""
+
+MAX_PENDING_CALLS_PER_SERVICE = 256
+"""Calls one client-provided service may have waiting at once, from all callers (the
+graph's too): what its provider is asked to hold; past it a call fails at once."""
+
 Outcome = tuple[bool, Any]
 """A graph service's outcome: (ok, response values or the reason)."""
 
@@ -119,6 +127,10 @@ class Services:
         self._local: dict[str, tuple[str, ServiceHandler]] = {}
         self._providers: dict[str, tuple[Session, str]] = {}
         self._pending: dict[str, _PendingCall] = {}
+        """Calls relayed to a providing client and not yet answered (bounded per caller and
+        per service; each goes with its answer, its timeout, its provider or its caller)."""
+        self._by_caller: dict[Session, int] = {}
+        self._by_service: dict[str, int] = {}
         self._call_counts: dict[str, int] = {}
 
     def handlers(self) -> dict[str, Callable[[Session, dict[str, Any]], None]]:
@@ -146,14 +158,14 @@ class Services:
             self._withdraw(session, service, f"service provider for {service} disconnected")
         for call_id, call in list(self._pending.items()):
             if call.caller is session:
-                del self._pending[call_id]
+                self._take(call_id)
 
     def expire(self) -> None:
         """Fail calls to client-provided services that waited longer than the timeout."""
         now = self._context.clock.monotonic_s()
         for call_id, call in list(self._pending.items()):
             if now >= call.deadline_s:
-                del self._pending[call_id]
+                self._take(call_id)
                 call.answer(False, f"{call.service} did not answer within "
                                    f"{self._timeout_s:g} s")
 
@@ -245,7 +257,19 @@ class Services:
         count = self._call_counts[service] = self._call_counts.get(service, 0) + 1
         forward_id = f"service_request:{service}:{count}"
         deadline_s = self._context.clock.monotonic_s() + self._timeout_s
+        if caller is not None and \
+                self._by_caller.get(caller, 0) >= MAX_PENDING_CALLS_PER_CLIENT:
+            answer(False, f"{service}: a client may have at most "
+                          f"{MAX_PENDING_CALLS_PER_CLIENT} calls waiting for an answer")
+            return
+        if self._by_service.get(service, 0) >= MAX_PENDING_CALLS_PER_SERVICE:
+            answer(False, f"{service}: {MAX_PENDING_CALLS_PER_SERVICE} calls are waiting for "
+                          "its provider already")
+            return
         self._pending[forward_id] = _PendingCall(caller, service, provider, deadline_s, answer)
+        if caller is not None:
+            self._by_caller[caller] = self._by_caller.get(caller, 0) + 1
+        self._by_service[service] = self._by_service.get(service, 0) + 1
         provider.reply({"op": "call_service", "id": forward_id, "service": service,
                         "args": args})
 
@@ -263,7 +287,7 @@ class Services:
         if call is None or call.provider is not session:
             raise BridgeError(f"service_response for {message['service']}: no call "
                               f"with id {str(message.get('id'))[:80]!r} is waiting for it")
-        del self._pending[str(message["id"])]
+        self._take(str(message["id"]))
         try:
             relay.charge(session, f"service_response for {call.service}", call.caller)
         except self._context.refusals as error:  # the caller still hears of its call
@@ -280,6 +304,16 @@ class Services:
         # rosbridge 2.x makes the provider's values the ROS response and ignores its
         # "result": the call succeeded once there is an answer of the right type.
         call.answer(True, values)
+
+    def _take(self, call_id: str) -> _PendingCall | None:
+        """Forget a pending call (its counts too); it, or None if it was not pending."""
+        call = self._pending.pop(call_id, None)
+        if call is None:
+            return None
+        if call.caller is not None:
+            _decrement(self._by_caller, call.caller)
+        _decrement(self._by_service, call.service)
+        return call
 
     @staticmethod
     def _providers_type(provider: Session, service: str) -> str | None:
@@ -315,5 +349,11 @@ class Services:
         self._context.graph.withdraw_service(service)
         for call_id, call in list(self._pending.items()):
             if call.provider is session and call.service == service:
-                del self._pending[call_id]
+                self._take(call_id)
                 call.answer(False, reason)
+
+
+def _decrement(counts: dict[Any, int], key: Any) -> None:
+    left = counts.pop(key, 1) - 1
+    if left:
+        counts[key] = left
