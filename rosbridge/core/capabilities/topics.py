@@ -114,6 +114,7 @@ class Encoded:
         self._frames: dict[tuple[str, str], Frames] = {}
         self._variants: dict[tuple[str, int | None, str], Frames] = {}
         self._variant_bytes = 0
+        self._deferred: dict[tuple[str, int | None, str], Deferred] = {}
         self._failed: dict[str, str] = {}
         """Formats this message cannot be written in, and why (each is tried once)."""
         self._reported: set[str] = set()
@@ -170,7 +171,11 @@ class Encoded:
         made = self._variants.get(key)
         if made is not None:
             return made
-        return Deferred(functools.partial(self._variant, key, type_name), len(self.json))
+        deferred = self._deferred.get(key)
+        if deferred is None:  # one for every subscriber of this form
+            deferred = self._deferred[key] = Deferred(
+                functools.partial(self._variant, key, type_name), len(self.json))
+        return deferred
 
     def _cheap(self, compression: str, namespace: str) -> Frames:
         """JSON or CBOR, made once; raises (ValueError) if it cannot be, once and again."""
