@@ -112,6 +112,9 @@ class BridgeConnection:
                                      clock.monotonic_s)
         self._handed_bytes = 0
         self._closing: asyncio.Task[None] | None = None
+        self._pacing = False
+        """Whether its writer waits for its handling budget (its costly formats): its own
+        lateness, which the watchdog does not take for a socket that stopped reading."""
 
     async def run(self) -> None:
         """Register, read frames until the connection ends, and unregister in ``finally``."""
@@ -201,7 +204,11 @@ class BridgeConnection:
                     while outbox.overflowed is None:
                         wait_s = self._handling.wait_s()
                         if wait_s > 0 and outbox.has_deferred():
-                            await asyncio.sleep(wait_s)  # only this client waits
+                            self._pacing = True
+                            try:
+                                await asyncio.sleep(wait_s)  # only this client waits
+                            finally:
+                                self._pacing = False
                         frame = outbox.pop()
                         self._charge_encoding()
                         if frame is None:
@@ -249,7 +256,7 @@ class BridgeConnection:
             buffered = transport.get_write_buffer_size()
             accepted = self._handed_bytes - buffered  # what the kernel took so far
             waiting = buffered > 0 or len(self.session.outbox) > 0
-            if not waiting or accepted - baseline >= PROGRESS_BYTES:
+            if not waiting or self._pacing or accepted - baseline >= PROGRESS_BYTES:
                 baseline, progress_s = accepted, clock.monotonic_s()
                 continue
             stalled_s = clock.monotonic_s() - progress_s
