@@ -117,3 +117,40 @@ def test_a_robots_page_without_its_token_watches_but_does_not_drive(server: Serv
         assert robot_state(server, "robot01")["x"] == 0.0, "a classmate's page drove robot01"
     finally:
         context.close()
+
+
+def test_an_open_class_page_keeps_the_token_of_the_name_it_enrolled(tmp_path: Path,
+                                                                     browser: Any) -> None:
+    roster = tmp_path / "roster.txt"
+    roster.write_text("alice\n")
+    server = start_server(["--class", str(roster), "--open-class"])
+    context = browser.new_context(viewport={"width": 1280, "height": 860})
+    try:
+        page = context.new_page()
+        page.goto(f"{server.http_url}/robots/newbie/")
+        page.wait_for_selector('#conn-status[data-status="connected"]', timeout=15000)
+        key = "websim.robotToken:/robots/newbie/"
+        for _ in range(50):
+            token = page.evaluate(f"localStorage.getItem('{key}')")
+            if token:
+                break
+            page.wait_for_timeout(100)
+        assert token and len(token) == 24, "the enrolling page was handed its robot's token"
+        # its reconnections send it: a reload drives newbie
+        page.reload()
+        page.wait_for_selector('#conn-status[data-status="connected"]', timeout=15000)
+        page.click("#view")
+        page.keyboard.down("ArrowUp")
+        wait_for(lambda: robot_state(server, "newbie")["x"] > 0.05, 10.0, "newbie to move",
+                 interval_s=0.2)
+        page.keyboard.up("ArrowUp")
+        # another browser (a classmate) cannot take the name
+        other = browser.new_context().new_page()
+        other.goto(f"{server.http_url}/robots/newbie/")
+        other.wait_for_selector('#conn-status[data-status="connected"]', timeout=15000)
+        other.wait_for_timeout(1000)
+        assert other.evaluate(f"localStorage.getItem('{key}')") is None
+        other.context.close()
+    finally:
+        context.close()
+        server.stop()

@@ -333,3 +333,29 @@ def test_forty_robots_draw_at_more_than_20_fps(browser: Any) -> None:
             assert log.console_errors == [] and log.page_errors == []
     finally:
         forty.stop()
+
+
+@needs_browser
+def test_a_cards_token_button_shows_that_robots_token_on_request(
+        server: ServerProcess, browser: Any) -> None:
+    """The instructor hands a robot's token to its student from the dashboard (issue 20 §4)."""
+    with dashboard(browser, server) as (page, log):
+        assert TOKENS["robot04"] not in page.content(), "tokens are shown only on request"
+        shown: list[tuple[str, str]] = []
+
+        def answer(dialog: Any) -> None:  # a prompt blocks the page until it is answered
+            shown.append((dialog.message, dialog.default_value))
+            dialog.dismiss()
+
+        page.on("dialog", answer)
+        page.click('[data-robot="robot04"] [data-action="token"]')
+        page.wait_for_function("true")  # let the call's answer and its dialog arrive
+        for _ in range(100):
+            if shown:
+                break
+            page.wait_for_timeout(100)
+        assert shown, "no token box"
+        message, token = shown[0]
+        assert token == TOKENS["robot04"]
+        assert message.startswith("robot04's token, for its student only")
+        assert log.page_errors == []

@@ -76,6 +76,12 @@ export class ClassCommands {
     return this._call(name, CLASS_SERVICES.status, {});
   }
 
+  /** Robot `name`'s own token, to hand to its student (an open class's newly enrolled too). */
+  async token(name) {
+    const reply = await this._call(name, CLASS_SERVICES.token, {});
+    return reply.token;
+  }
+
   /** Back to the spawn pose, command zeroed (the robot's /reset_simulation). */
   reset(name) {
     return this._call(name, this.robot.services.reset, {});

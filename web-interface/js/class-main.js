@@ -99,6 +99,12 @@ async function main() {
   const defaultMode = parameterSpec(robot, PARAMETERS.mode).default;
   const actions = {
     reset: (name) => commands.reset(name),
+    // shown on request only (a dashboard may be on a projector), in a box it can be copied from
+    token: (name) => commands.token(name).then((token) => {
+      window.prompt(`${name}'s token, for its student only (their page: `
+        + `/robots/${name}/#token=TOKEN; their code: ws://HOST:9090/robots/${name}?token=TOKEN)`,
+      token);
+    }),
     pause: (name) => commands.pause(name, !isHeld(stateOf(name))),
     mode: (name) => commands.setMode(name, otherMode(robot, stateOf(name).status?.mode
       ?? defaultMode)),

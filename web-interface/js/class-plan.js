@@ -13,6 +13,7 @@ export const CLASS_SERVICES = Object.freeze({
   robots: Object.freeze({ name: '/websim/robots', type: 'websim/srv/Robots' }), // root: names
   status: Object.freeze({ name: '/websim/status', type: 'websim/srv/RobotStatus' }), // per robot
   pause: Object.freeze({ name: '/websim/pause', type: 'websim/srv/Pause' }), // per robot
+  token: Object.freeze({ name: '/websim/token', type: 'websim/srv/RobotToken' }), // per robot
 });
 
 /** Pose messages per second the whole grid may cost (ground truth; the server's 20 Hz each). */

@@ -12,13 +12,13 @@ import { explainClosed, explainWorkerClosed, observedRoslib } from './class-root
 const SEVERITY = Object.freeze({ ok: 0, info: 1, warn: 2, error: 3 });
 
 /**
- * ClassCommands' per-robot calls (status, reset, pause, setMode, setPayload), each sent to
- * the ClassCommands `commandsOf(name)` gives; a name it throws for rejects.
+ * ClassCommands' per-robot calls (status, reset, pause, setMode, setPayload, token), each
+ * sent to the ClassCommands `commandsOf(name)` gives; a name it throws for rejects.
  */
 export function routedCommands(commandsOf) {
   const route = (method) => async (name, ...args) => commandsOf(name)[method](name, ...args);
-  return Object.freeze(Object.fromEntries(['status', 'reset', 'pause', 'setMode', 'setPayload']
-    .map((method) => [method, route(method)])));
+  return Object.freeze(Object.fromEntries(['status', 'reset', 'pause', 'setMode', 'setPayload',
+    'token'].map((method) => [method, route(method)])));
 }
 
 export class ClassRoots {
