@@ -52,38 +52,59 @@ async def read_all(connection: Any, frames: list[Any]) -> None:
         pass
 
 
+async def costly_attack(attacked_url: str, healthy_url: str
+                        ) -> tuple[float, float, list[Any], int]:
+    """32 sockets from 127.0.0.2 on ``attacked_url`` asking png and fragment sizes from 1 to
+    1148 on four topics, while a healthy client counts /odom on ``healthy_url``."""
+    frames: list[Any] = []
+    refused = 0
+    async with OdomListener(healthy_url) as healthy:
+        await asyncio.sleep(1.0)
+        sockets = []
+        for number in range(32):
+            try:
+                connection = await attacker(attacked_url)
+            except (websockets.InvalidStatus, OSError):
+                refused += 1  # a per-address budget may refuse some: fine
+                continue
+            size = 1 + 37 * number
+            for topic in ("/scan", "/odom", "/tf", "/ground_truth"):
+                await connection.send(json.dumps({
+                    "op": "subscribe", "topic": topic, "fragment_size": size,
+                    "compression": "png" if number % 2 else "none"}))
+            sockets.append(connection)
+        readers = [asyncio.create_task(read_all(ws, frames)) for ws in sockets]
+        await asyncio.sleep(1.0)
+        start = healthy.mark()
+        await asyncio.sleep(4.0)
+        rate_hz, gap_s = healthy.rate_since(start)
+        for connection in sockets:
+            await connection.close()
+        await asyncio.gather(*readers)
+    return rate_hz, gap_s, frames, refused
+
+
+@pytest.mark.slow
+def test_costly_encodings_on_one_class_robot_never_make_anothers_odom_late(
+        tmp_path: Any) -> None:
+    server = start_server(["--class", "2"])
+    try:
+        base = f"ws://127.0.0.1:{server.ws_port}/robots/"
+        rate_hz, gap_s, frames, refused = asyncio.run(
+            costly_attack(base + "robot01", base + "robot02"))
+        print(f"class: robot02's /odom {rate_hz:.2f} Hz, largest gap {gap_s:.3f} s, while "
+              f"robot01 is attacked ({len(frames)} frames, {refused} sockets refused)")
+        assert rate_hz >= MIN_HEALTHY_HZ, f"healthy client saw /odom at {rate_hz:.1f} Hz"
+        assert gap_s <= MAX_GAP_S, f"healthy client saw a {gap_s:.3f} s gap"
+        assert frames or refused
+    finally:
+        server.stop()
+
+
 @pytest.mark.slow
 def test_costly_encodings_asked_by_many_sockets_never_make_a_healthy_client_late(
         server: ServerProcess) -> None:
-    async def scenario() -> tuple[float, float, list[Any], int]:
-        frames: list[Any] = []
-        refused = 0
-        async with OdomListener(server.ws_url) as healthy:
-            await asyncio.sleep(1.0)
-            sockets = []
-            for number in range(32):
-                try:
-                    connection = await attacker(server.ws_url)
-                except (websockets.InvalidStatus, OSError):
-                    refused += 1  # a per-address budget may refuse some: fine
-                    continue
-                size = 1 + 37 * number
-                for topic in ("/scan", "/odom", "/tf", "/ground_truth"):
-                    await connection.send(json.dumps({
-                        "op": "subscribe", "topic": topic, "fragment_size": size,
-                        "compression": "png" if number % 2 else "none"}))
-                sockets.append(connection)
-            readers = [asyncio.create_task(read_all(ws, frames)) for ws in sockets]
-            await asyncio.sleep(1.0)
-            start = healthy.mark()
-            await asyncio.sleep(4.0)
-            rate_hz, gap_s = healthy.rate_since(start)
-            for connection in sockets:
-                await connection.close()
-            await asyncio.gather(*readers)
-        return rate_hz, gap_s, frames, refused
-
-    rate_hz, gap_s, frames, refused = asyncio.run(scenario())
+    rate_hz, gap_s, frames, refused = asyncio.run(costly_attack(server.ws_url, server.ws_url))
     print(f"healthy /odom {rate_hz:.2f} Hz, largest gap {gap_s:.3f} s; attacker got "
           f"{len(frames)} frames, {refused} sockets refused")
     assert rate_hz >= MIN_HEALTHY_HZ, f"healthy client saw /odom at {rate_hz:.1f} Hz"
