@@ -58,10 +58,12 @@ enrolled the name: the page keeps it)."""
 DRIVE_RULES = DriveRules(
     topics=frozenset(spec.name for spec in ROBOT_TOPICS if spec.direction == "in"),
     services=frozenset({RESET_SERVICE}),
+    watch_services=(*RESERVED_NAMESPACES, RESET_SERVICE),
     hint=": connect to ws://HOST:9090/robots/NAME?token=TOKEN with the robot's token (the "
          "links file, or the page the student enrolled it with)")
 """What a class robot's client needs its token for: driving it (the topics it subscribes),
-resetting it, offering services or actions on it. Changing its parameters and pausing it
+resetting it, offering services or actions on it, calling services it does not offer (a
+classmate's code's, the ROS graph's). Changing its parameters and pausing it
 need admin rights (``require_admin``: the robot's token or the instructor's) in any case."""
 
 

@@ -469,6 +469,20 @@ def test_a_classmate_without_the_token_watches_but_cannot_drive_or_reset(
     assert calls["t"]["result"] is True and "/odom" in calls["t"]["values"]["topics"]
     assert any(m.get("topic") == "/odom" for m in got), "a watcher gets the robot's topics"
     assert asyncio.run(ground_truth_x(robot_url(server, "bob"))) == start_x == 0.0
+    # a service bob's own code offers is his: a classmate cannot call it either
+
+    async def offered_and_called() -> dict[str, Any]:
+        async with websockets.connect(owner_url(server, "bob")) as owner:
+            await owner.send(json.dumps({"op": "advertise_service", "service": "/bobs_service",
+                                         "type": "std_srvs/Empty"}))
+            await asyncio.sleep(0.3)
+            got = await replies(robot_url(server, "bob"), [
+                {"op": "call_service", "service": "/bobs_service", "id": "b"}], 0.5)
+            return next(m for m in got if m.get("op") == "service_response")
+
+    offered = asyncio.run(offered_and_called())
+    assert offered["result"] is False and "calling /bobs_service changes the robot" \
+        in offered["values"]
     # bob's own token (or the instructor's) drives bob; alice's token does not
     for token, moves in ((TOKENS["alice"], False), (TOKENS["bob"], True), (ADMIN_TOKEN, True)):
         got = asyncio.run(replies(robot_url(server, "bob", token), [

@@ -6,8 +6,9 @@ one other access rule, admin rights for changing parameters, is ``services.requi
 A client without the drive right (``Session.may_drive``: a class robot's client that presented
 neither the robot's token nor the instructor's) may only watch: subscribe, list, call the
 services that change nothing. What changes the robot is the bridge's owner's to say
-(``DriveRules``: the topics the robot subscribes, its services that change it); offering
-services or actions, and sending goals, always need the right.
+(``DriveRules``: the topics the robot subscribes, its services that change it, the namespaces
+of its own services, the only ones a watcher may call); offering services or actions, and
+sending goals, always need the right.
 
 Every client (student or admin) may:
 
@@ -48,12 +49,17 @@ class DriveRules:
 
     Attributes:
         topics: topics the robot subscribes (``/cmd_vel``): publishing them needs the right.
-        services: services that change the robot (reset, parameters, pause).
+        services: services that change the robot (``/reset_simulation``).
+        watch_services: the namespaces of the services a client without the right may call
+            (the robot's own: ``/rosapi/``...), but for ``services``; any other service (one
+            a client offers, the ROS graph's) needs the right. Empty: every service but
+            ``services``.
         hint: how to get the right, appended to a refusal.
     """
 
     topics: frozenset[str] = frozenset()
     services: frozenset[str] = frozenset()
+    watch_services: tuple[str, ...] = ()
     hint: str = ""
 
     def refusal(self, what: str) -> str:
@@ -133,7 +139,8 @@ def _check_drive(op: str, name: str, drive: DriveRules) -> None:
         raise AccessError(drive.refusal(f"{op} {name}"))
     if op in ("advertise", "publish") and name in drive.topics:
         raise AccessError(drive.refusal(f"publishing {name}"))
-    if op == "call_service" and name in drive.services:
+    if op == "call_service" and (name in drive.services or (
+            drive.watch_services and not name.startswith(drive.watch_services))):
         raise AccessError(drive.refusal(f"calling {name}"))
 
 
