@@ -89,7 +89,7 @@ SPARE_CLIENTS = 10
 HOST = "127.0.0.1"
 """The only address the benchmark binds or connects to."""
 
-ADMIN_TOKEN = "bench-admin-token"
+ADMIN_TOKEN = "Bench-admin-token-2026-runs"
 """Admin secret of the benchmarked server (no admin operation is used)."""
 
 SUBSCRIBED = (ODOM, TF, SCAN)
@@ -200,6 +200,8 @@ def running_server(log_dir: Path, extra_args: Sequence[str] = ()) -> Iterator[Se
                "--host", HOST, "--ws-port", str(ws_port), "--http-port", str(http_port),
                "--admin-token", ADMIN_TOKEN, *extra_args]
     env = {**os.environ, "PYTHONUNBUFFERED": "1",
+           # a class's state file of this run's own (a run never restores the last one's)
+           "XDG_DATA_HOME": str(log_dir / f"websim-data-{ws_port}"),
            "PYTHONPATH": os.pathsep.join(filter(None, [str(PROJECT_DIR),
                                                        os.environ.get("PYTHONPATH")]))}
     with log_path.open("wb") as log:
