@@ -25,7 +25,7 @@ def test_plots_pause_zoom_and_save_their_samples_as_csv(server: ServerProcess, b
                       viewport={"width": 1280, "height": 860}) as (page, log):
         plotted = "window.websim.plots.charts[0].plot.data[0].length"
         page.wait_for_function(f"{plotted} > 10", timeout=10000)
-        page.click("#plots .plot-tools button:text('Pause')")
+        page.click("#plots-tools button:text('Pause')")
         frozen = page.evaluate(plotted)
         samples = page.evaluate("window.websim.state.history.t.length")
         page.wait_for_function(f"window.websim.state.history.t.length > {samples + 10}",
@@ -43,11 +43,11 @@ def test_plots_pause_zoom_and_save_their_samples_as_csv(server: ServerProcess, b
         assert x_max - x_min < 0.6 * HISTORY_PLOTTED_S, (x_min, x_max)  # zoomed: 40 % of it
         assert x_min > -0.6 * HISTORY_PLOTTED_S, (x_min, x_max)
         with page.expect_download() as download:
-            page.click("#plots .plot-tools button:text('CSV')")
+            page.click("#plots-tools button:text('CSV')")
         text = Path(download.value.path()).read_text()
         rows = text.strip().splitlines()
         assert rows[0].startswith("stamp_s,v_cmd_mps,v_mps")
         assert len(rows) > samples
-        page.click("#plots .plot-tools button:text('Resume')")
+        page.click("#plots-tools button:text('Resume')")
         page.wait_for_function(f"{plotted} > {frozen}", timeout=10000)
         assert log.page_errors == []

@@ -4,9 +4,9 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  createState, displayPose, historyCsv, HISTORY_S, noteLinkDown, noteLinkUp, noteOwnReset, notePose,
-  onGroundTruth, onOdometry, onWorld, POSE_HISTORY_S, poseAt, rateHz, RESET_SHOW_MS, resetByOther,
-  shownAtMs, TRUTH_STALE_MS, unwrapDeg,
+  createState, displayPose, historyCsv, HISTORY_S, lastStepS, noteLinkDown, noteLinkUp,
+  noteOwnReset, notePose, onCommand, onGroundTruth, onOdometry, onWorld, POSE_HISTORY_S, poseAt,
+  rateHz, RESET_SHOW_MS, resetByOther, shownAtMs, STEP_STEADY_S, TRUTH_STALE_MS, unwrapDeg,
 } from '../../web-interface/js/state.js';
 
 function odometry(x, y, stampS, frame = 'odom') {
@@ -120,7 +120,8 @@ test('the heading is unwrapped across ±180°, the setpoint on the heading\'s tu
   assert.deepEqual(headings, [170, 179, 181, 190]);
   assert.deepEqual(state.history.setpointDeg.map((d) => Math.round(d)), [185, 185, 185, 185]);
   const csv = historyCsv(state.history).trim().split('\n');
-  assert.equal(csv[0], 'stamp_s,v_cmd_mps,v_mps,omega_cmd_rps,omega_rps,heading_deg,setpoint_deg');
+  assert.equal(csv[0], 'stamp_s,v_cmd_mps,v_mps,omega_cmd_rps,omega_rps,heading_deg,setpoint_deg,'
+    + 'v_true_mps,omega_true_rps');
   assert.equal(csv.length, 5);
   assert.equal(csv[1].split(',')[0], '10');
 });
@@ -136,4 +137,34 @@ test('while the bridge is down the picture stays as it was: ground truth, its ma
   assert.equal(displayPose(state, later).frame, 'odom'); // what the view used to fall back to
   noteLinkUp(state);
   assert.equal(shownAtMs(state, later), later);
+});
+
+test('the last step of a command: a change after a steady command, not a PID\'s every tick', () => {
+  const t = Array.from({ length: 40 }, (_, i) => i * 0.05);
+  const keys = t.map((s) => (s < 0.5 ? 0 : s < 1.2 ? 0.3 : 0)); // press, release
+  assert.equal(lastStepS({ t, v: keys }, 'v', 0.01), t[24]); // the release at 1.2 s
+  const pid = t.map((s) => (s < 1 ? 0 : Math.cos(s * 7))); // starts at 1 s, changes each tick
+  assert.equal(lastStepS({ t, v: pid }, 'v', 0.01), t[20]);
+  const quick = t.map((s) => (s < 1 ? 0.3 : s < 1 + STEP_STEADY_S / 2 ? 0 : 0.3));
+  assert.equal(lastStepS({ t, v: quick }, 'v', 0.01), t[20]); // the press after too short a rest
+  assert.equal(lastStepS({ t, v: t.map(() => 0.2) }, 'v', 0.01), null);
+  const setpoint = t.map((s) => (s < 1 ? null : 90)); // the PID started
+  assert.equal(lastStepS({ t, v: setpoint }, 'v', 1), t[20]);
+});
+
+test('the true speed of the same stamp joins the /odom sample, whichever came first', () => {
+  const state = createState();
+  onCommand(state, 0.3, 0);
+  const moving = (v, stampS, frame) => {
+    const msg = odometry(0, 0, stampS, frame);
+    msg.twist = { twist: { linear: { x: v, y: 0, z: 0 }, angular: { x: 0, y: 0, z: 0 } } };
+    return msg;
+  };
+  onOdometry(state, moving(0.3, 10, 'odom'), 0); // odometry first: the wheels slip
+  onGroundTruth(state, moving(0.125, 10, 'map'), 1);
+  onGroundTruth(state, moving(0.25, 10.05, 'map'), 50); // ground truth first
+  onOdometry(state, moving(0.3, 10.05, 'odom'), 51);
+  assert.deepEqual(state.history.vMeas, [0.3, 0.3]);
+  assert.deepEqual(state.history.vTrue, [0.125, 0.25]);
+  assert.match(historyCsv(state.history).split('\n')[0], /,v_true_mps,omega_true_rps$/);
 });

@@ -105,7 +105,8 @@ async function main() {
   const view = createView(state, robot);
   const teleop = new Teleop(connection, state, robot);
   bindKeys(teleop);
-  const plots = new LivePlots($('#plots'), state, ['linear', 'angular']);
+  const plots = new LivePlots($('#plots'), state, ['linear', 'angular'],
+    { tools: $('#plots-tools') });
   const readouts = new Readouts(connection, state, $('#readouts'), robot);
   const params = new ParametersPanel(connection, robot, {
     form: $('#params-form'), fields: $('#params-fields'), notice: $('#params-notice'),

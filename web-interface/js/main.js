@@ -46,7 +46,8 @@ async function main() {
   subscribeRobot(connection, state, robot);
   const view = createView(state, robot);
   const { teleop, limits } = createTeleop(connection, state, robot);
-  const plots = new LivePlots($('#plots'), state, ['linear', 'angular']);
+  const plots = new LivePlots($('#plots'), state, ['linear', 'angular'],
+    { tools: $('#plots-tools') });
   const headingPlot = new LivePlots($('#heading-plot'), state, ['heading']);
   const readouts = new Readouts(connection, state, $('#readouts'), robot);
   const pid = new PidPanel(connection, state, robot, {

@@ -27,6 +27,8 @@ export const RESET_SHOW_MS = 4000;
 export const OWN_RESET_MS = 3000;
 /** Seconds of stamped poses kept per frame, to draw a scan where it was taken. */
 export const POSE_HISTORY_S = 2;
+/** A change of the command is a step when the command held this long (s) before it. */
+export const STEP_STEADY_S = 0.3;
 
 export function createState() {
   return {
@@ -44,8 +46,9 @@ export function createState() {
     command: { linear: 0, angular: 0 }, // the latest /cmd_vel (m/s, rad/s)
     drivers: createDrivers(), // whose /cmd_vel that is: this page's or another client's
     setpointDeg: null, // the heading PID's setpoint while it runs
-    history: {
+    history: { // per /odom: its stamp (s), the command, odometry's and ground truth's speeds
       t: [], vCmd: [], vMeas: [], wCmd: [], wMeas: [], headingDeg: [], setpointDeg: [],
+      vTrue: [], wTrue: [],
     },
     arrivals: new Map(), // stream (robot.json's topic key: odom, scan...) -> arrival times (ms)
     poses: { map: [], odom: [] }, // per frame, the recent stamped poses, oldest first
@@ -150,6 +153,12 @@ export function onGroundTruth(state, msg, nowMs) {
   state.truth = pose;
   state.truthAtMs = nowMs;
   notePose(state, 'map', pose);
+  const h = state.history; // the same tick's /odom may have come first: its sample gets this
+  const last = h.t.length - 1;
+  if (last >= 0 && h.t[last] === pose.stampS) {
+    h.vTrue[last] = pose.v;
+    h.wTrue[last] = pose.omega;
+  }
   noteArrival(state, 'ground_truth', nowMs);
   extendTrail(state, pose, 'map', nowMs);
 }
@@ -223,16 +232,40 @@ export function unwrapDeg(deg, nearDeg) {
   return nearDeg + (((deg - nearDeg) % 360) + 540) % 360 - 180;
 }
 
-/** The plotted history as CSV: one row per /odom, stamps in s, speeds in SI, angles in °. */
+/**
+ * The plotted history as CSV: one row per /odom, stamps in s, speeds in SI, angles in °; the
+ * true speeds (ground truth, a simulation's) empty where there is none.
+ */
 export function historyCsv(history) {
   const columns = [['stamp_s', 't'], ['v_cmd_mps', 'vCmd'], ['v_mps', 'vMeas'],
     ['omega_cmd_rps', 'wCmd'], ['omega_rps', 'wMeas'], ['heading_deg', 'headingDeg'],
-    ['setpoint_deg', 'setpointDeg']];
+    ['setpoint_deg', 'setpointDeg'], ['v_true_mps', 'vTrue'], ['omega_true_rps', 'wTrue']];
   const rows = [columns.map(([name]) => name).join(',')];
   for (let i = 0; i < history.t.length; i += 1) {
     rows.push(columns.map(([, key]) => (history[key][i] ?? '')).join(','));
   }
   return `${rows.join('\n')}\n`;
+}
+
+/**
+ * The stamp (s) of the last step of history[key] (vCmd, wCmd, setpointDeg): the last sample
+ * that differs by at least `minChange` from the one before, when that one had held for
+ * STEP_STEADY_S (a PID's or a joystick's ever-changing command steps only where it started);
+ * null (no value) counts as its own level. Null when there is no such step.
+ */
+export function lastStepS(history, key, minChange, steadyS = STEP_STEADY_S) {
+  const { t } = history;
+  const values = history[key];
+  const same = (a, b) => (a === null || b === null ? a === b : Math.abs(a - b) < minChange);
+  for (let i = values.length - 1; i > 0; i -= 1) {
+    if (same(values[i], values[i - 1])) continue;
+    let steady = true;
+    for (let j = i - 2; steady && j >= 0 && t[j] >= t[i] - steadyS; j -= 1) {
+      steady = same(values[j], values[i - 1]);
+    }
+    if (steady) return t[i];
+  }
+  return null;
 }
 
 function recordHistory(state, pose) {
@@ -247,6 +280,9 @@ function recordHistory(state, pose) {
   h.vMeas.push(pose.v);
   h.wCmd.push(state.command.angular);
   h.wMeas.push(pose.omega);
+  const truth = state.truth?.stampS === t ? state.truth : null; // else filled in when it comes
+  h.vTrue.push(truth ? truth.v : null);
+  h.wTrue.push(truth ? truth.omega : null);
   const headingDeg = unwrapDeg((pose.theta * 180) / Math.PI, h.headingDeg.at(-1));
   h.headingDeg.push(headingDeg);
   h.setpointDeg.push(state.setpointDeg === null ? null
