@@ -175,7 +175,7 @@ class Server:
 
     def health(self, timeout_s: float = 2.0) -> dict[str, Any]:
         """The server's /healthz report (blocking)."""
-        url = f"http://{HOST}:{self.http_port}/healthz"
+        url = f"http://{HOST}:{self.http_port}/healthz?token={ADMIN_TOKEN}"
         with urllib.request.urlopen(url, timeout=timeout_s) as response:
             return dict(json.load(response))
 

@@ -14,6 +14,8 @@ keeps the token.
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable
 from typing import Any
 
 from classroom.instructor_view import InstructorView
@@ -27,6 +29,21 @@ from rosbridge.transport.schedule import Schedule
 ROOT_REFUSAL = ("this server hosts a class: connect to ws://HOST:PORT/robots/NAME for robot "
                 "NAME (ws://HOST:PORT/ is the instructor's view of every robot: it needs "
                 "the instructor's token)")
+
+
+def class_view_limits(limits: ClientLimits, robots: int) -> ClientLimits:
+    """A client's ``limits`` sized for a view of ``robots`` robots (the instructor's).
+
+    Per robot: 8 messages/s and 8 subscriptions more, 64 KiB more of queue; half a core of
+    handling time (a second of burst). The address budgets do not apply to it.
+    """
+    return dataclasses.replace(
+        limits, max_rate=limits.max_rate + 8.0 * robots,
+        max_subscriptions=limits.max_subscriptions + 8 * robots,
+        max_queued_bytes=limits.max_queued_bytes + (64 << 10) * robots,
+        max_replies=limits.max_replies + 8 * robots,
+        handling_share=max(limits.handling_share, 0.5),
+        handling_burst_s=max(limits.handling_burst_s, 1.0))
 
 
 class ClassServer(WebSocketFront):
@@ -46,19 +63,82 @@ class ClassServer(WebSocketFront):
                  origins: OriginPolicy | None = None, *, open_drive: bool = False) -> None:
         super().__init__(admin_token, limits, origins, classroom.clock)
         self.classroom = classroom
+        self.owns: Callable[[str], bool] | None = None
+        """For a worker behind nginx: whether a name is routed to it (its own robots); the
+        worker makes no other (a decoy of a classmate's robot). None: every name."""
         self.open_drive = open_drive
 
     def route(self, path: str) -> tuple[Destination, str | None] | str:
-        """``/robots/NAME`` (a trailing slash allowed) is robot NAME; nothing else is a robot."""
+        """``/robots/NAME`` (a trailing slash allowed) is robot NAME; nothing else is a robot.
+
+        Makes the robot if it is to be made (enrolled in an open class, or a worker's robot
+        first routed here): called once the handshake was accepted (``find`` before).
+        """
+        found = self.find(path)
+        if isinstance(found, str):
+            return found
+        _, name = found
+        host = self.classroom.get(name or "")
+        if host is None:
+            return self._unknown(name or "")
+        return host, name
+
+    def find(self, path: str) -> tuple[Destination | None, str | None] | str:
+        """Robot NAME of ``/robots/NAME``, made by nobody.
+
+        Returns:
+            (host, name), host None for a robot ``route`` would make; or why there is none.
+        """
         if not path.startswith(ROBOTS_PREFIX):
             return ROOT_REFUSAL
         name = path[len(ROBOTS_PREFIX):].rstrip("/")
-        host = self.classroom.get(name)
+        host = self._hosted(name)
         if host is not None:
             return host, name
+        if not self.classroom.knows(name):
+            return self._unknown(name)
+        if self.owns is not None and not self.owns(name):
+            return (f"robot '{name[:40]}' is not this worker's: the proxy routes it to "
+                    "another (ws://HOST:PORT/robots/NAME)")
+        if name not in self.classroom.students and \
+                len(self.classroom) >= self.classroom.max_robots:
+            return self._unknown(name)
+        return None, name
+
+    def _hosted(self, name: str) -> Destination | None:
+        for hosted, host in self.classroom:
+            if hosted == name:
+                return host
+        return None
+
+    def _unknown(self, name: str) -> str:
         if self.classroom.open_class and len(self.classroom) >= self.classroom.max_robots:
             return f"the class is full ({self.classroom.max_robots} robots)"
         return f"no robot named '{name[:40]}' in this class"
+
+    def admit(self, name: str | None, address: str) -> tuple[int, str] | None:
+        """A new name in an open class spends one of its address's enrolments.
+
+        Past ``address_enrolments`` it is refused (HTTP 429); a roster's robot made on first
+        use spends none.
+        """
+        if name is None or name in self.classroom.students:
+            return None
+        if not self.addresses.of(address).enrol():
+            return 429, (f"too many new robots from one address (at most "
+                         f"{self.limits.address_enrolments}, then "
+                         f"{self.limits.address_enrolments_per_s:g}/s); try again later")
+        return None
+
+    def root_limits(self) -> ClientLimits:
+        """The instructor's root view: one client for the whole class, sized for it.
+
+        Its message rate, subscriptions, handling time and queue scale with the class's
+        robots (the dashboard subscribes to three topics per robot at once), so it is never
+        throttled as a student is.
+        """
+        return class_view_limits(self.limits, max(len(self.classroom),
+                                                  self.classroom.max_robots))
 
     def root_view(self, path: str, token: str | None) -> tuple[Hub, Schedule] | None:
         """The instructor's view of every robot, at ``/`` with the instructor's token."""
@@ -83,13 +163,18 @@ class ClassServer(WebSocketFront):
         """Tick every robot forever."""
         await self.classroom.run_ticks()
 
-    def health(self) -> dict[str, Any]:
-        """The class: totals, and each robot's own report under ``robots``."""
+    def health(self, full: bool = True) -> dict[str, Any]:
+        """The class: totals, and each robot's own report under ``robots``.
+
+        ``full`` False (public, without the instructor's token): counts only, no robot's
+        name (``robots`` and ``degraded_robots`` left out).
+        """
         robots = {name: host.health() for name, host in self.classroom}
         degraded = [name for name, report in robots.items() if report["status"] != "ok"]
-        return {
+        report = {
             "status": "degraded" if degraded else "ok",
             "degraded_robots": degraded,
+            "degraded_count": len(degraded),
             "uptime_s": self._uptime_s(),
             "ticks_due": self.classroom.schedule.ticks_due(),
             "robot_count": len(robots),
@@ -100,3 +185,6 @@ class ClassServer(WebSocketFront):
                                        for report in robots.values()), default=0.0),
             "robots": robots,
         }
+        if not full:
+            del report["robots"], report["degraded_robots"]
+        return report

@@ -16,9 +16,11 @@ shows the robots of all of them in one grid.
 from __future__ import annotations
 
 import argparse
+import bisect
 import json
 import os
 import sys
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -58,6 +60,50 @@ def parse_worker(text: str) -> Worker:
     return Worker(host, http_port, ws_port)
 
 
+CHASH_POINTS_PER_SERVER = 160
+"""nginx's ``hash ... consistent`` (ketama): points per server of weight 1 on its ring."""
+
+
+def chash_ring(servers: list[str]) -> list[tuple[int, int]]:
+    """The consistent-hash ring nginx makes of ``servers`` (``HOST:PORT``, as in its upstream).
+
+    As ``ngx_http_upstream_init_chash``: for each server ``CHASH_POINTS_PER_SERVER`` points,
+    the CRC-32 of HOST, a zero byte, PORT and the previous point (4 bytes little-endian, 0
+    first), sorted, equal hashes kept once. Returns (hash, server index) pairs.
+    """
+    points: list[tuple[int, int]] = []
+    for index, server in enumerate(servers):
+        host, _, port = server.rpartition(":")
+        base = host.encode() + b"\0" + port.encode()
+        previous = 0
+        for _ in range(CHASH_POINTS_PER_SERVER):
+            previous = zlib.crc32(base + previous.to_bytes(4, "little"))
+            points.append((previous, index))
+    points.sort(key=lambda point: point[0])
+    ring: list[tuple[int, int]] = []
+    for point in points:
+        if not ring or ring[-1][0] != point[0]:
+            ring.append(point)
+    return ring
+
+
+def worker_ring(workers: list[Worker]) -> list[tuple[int, int]]:
+    """The ring of the workers' WebSocket upstream (``chash_ring``)."""
+    return chash_ring([f"{worker.host}:{worker.ws_port}" for worker in workers])
+
+
+def worker_for(name: str, ring: list[tuple[int, int]]) -> int:
+    """The index of the worker ``websim nginx-config``'s nginx routes robot ``name`` to.
+
+    ``hash $robot consistent`` on the workers' ``ring`` (``worker_ring``): the first point at
+    or after ``crc32(name)``, wrapping (``ngx_http_upstream_find_chash_point``), while every
+    worker is up (nginx moves a down worker's names to the next point).
+    """
+    key = zlib.crc32(name.encode())
+    position = bisect.bisect_left(ring, key, key=lambda point: point[0])
+    return ring[position % len(ring)][1]
+
+
 def worker_path(index: int) -> str:
     """``/workers/K/``: where worker K (0-based, in ``--workers`` order) has its root view.
 
@@ -75,31 +121,41 @@ def workers_json(workers: list[Worker]) -> str:
     return json.dumps({"workers": [worker_path(index) for index in range(len(workers))]})
 
 
-def _websocket_location(path: str, upstream: str) -> str:
+CLIENT_HEADERS = """            proxy_set_header X-Real-IP $remote_addr;
+            proxy_set_header X-Forwarded-For $proxy_add_x_forwarded_for;
+"""
+"""Who the client is: a worker started with ``--trusted-proxy`` (nginx's address) gives each
+student their own per-address budgets, not all of them nginx's."""
+
+
+def _websocket_location(path: str, upstream: str, exact: bool = False) -> str:
     """A ``location`` proxying WebSockets at ``path`` to ``upstream``.
 
-    With the upgrade headers, and timeouts long enough for a page idle through a lesson.
+    ``exact``: that path only, nothing under it. With the upgrade headers, the client's
+    address, and timeouts long enough for a page idle through a lesson.
     """
-    return f"""        location {path} {{
+    match = "= " if exact else ""
+    return f"""        location {match}{path} {{
             proxy_pass {upstream};
             proxy_http_version 1.1;
             proxy_set_header Upgrade $http_upgrade;
             proxy_set_header Connection $connection_upgrade;
             proxy_set_header Host $http_host;
-            proxy_read_timeout 1h;
+{CLIENT_HEADERS}            proxy_read_timeout 1h;
             proxy_send_timeout 1h;
         }}
 """
 
 
 def _worker_roots(workers: list[Worker]) -> str:
-    """One ``location /workers/K/`` per worker, proxied to that worker's WebSocket root.
+    """One ``location = /workers/K/`` per worker, proxied to that worker's WebSocket root.
 
-    The query (``?token=``) is passed on, so the instructor's dashboard reaches every
-    worker's robots.
+    That path only: ``/workers/K/robots/NAME`` is no way to reach a robot on a worker its
+    name does not hash to (a decoy of a classmate's robot). The query (``?token=``) is
+    passed on, so the instructor's dashboard reaches every worker's robots.
     """
     return "".join(_websocket_location(worker_path(index),
-                                       f"http://{worker.host}:{worker.ws_port}/")
+                                       f"http://{worker.host}:{worker.ws_port}/", exact=True)
                    for index, worker in enumerate(workers))
 
 
@@ -124,6 +180,8 @@ def nginx_config(workers: list[Worker], http_listen: str, ws_listen: str) -> str
 # http://HOST:{http_port}{ROBOTS_PREFIX}NAME/, on the worker its name hashes to.
 # The dashboard, http://HOST:{http_port}/class, reads /workers.json and opens each
 # worker's root view at ws://HOST:{ws_port}/workers/K/?token=INSTRUCTOR.
+# Start each worker with --trusted-proxy NGINX_ADDRESS, so it reads the client's address
+# from X-Real-IP and budgets each student, not nginx, per address.
 worker_processes auto;
 events {{
     worker_connections 4096;
@@ -147,7 +205,7 @@ http {{
         location {ROBOTS_PREFIX} {{
             proxy_pass http://websim_pages;
             proxy_set_header Host $http_host;
-        }}
+{CLIENT_HEADERS}        }}
         location = /workers.json {{
             default_type application/json;
             add_header Cache-Control "no-store";
@@ -156,7 +214,7 @@ http {{
         location / {{
             proxy_pass http://websim_pages;
             proxy_set_header Host $http_host;
-        }}
+{CLIENT_HEADERS}        }}
     }}
     server {{
         listen {ws_listen};

@@ -53,6 +53,12 @@ class SimServer(WebSocketFront):
         """Run the robot's tick loop forever."""
         await self.host.run_ticks()
 
-    def health(self) -> dict[str, Any]:
-        """A small status report: uptime, the robot's ticks, jitter, clients and faults."""
-        return {**self.host.health(), "uptime_s": self._uptime_s()}
+    def health(self, full: bool = True) -> dict[str, Any]:
+        """A small status report: uptime, the robot's ticks, jitter, clients and faults.
+
+        ``full`` False (public): without the last driver's address.
+        """
+        report = {**self.host.health(), "uptime_s": self._uptime_s()}
+        if not full:
+            report.pop("last_driver", None)
+        return report

@@ -66,13 +66,31 @@ def bridge(server: Any) -> Iterator[Any]:
     client.close()
 
 
+class _EvalAllowed:
+    """A browser whose contexts let Playwright's ``wait_for_function`` evaluate its predicates
+    (``bypass_csp``): the pages' CSP forbids eval, which only the tests use. The pages' own
+    code runs under the CSP in ``test_front_door.py`` (``bypass_csp=False``)."""
+
+    def __init__(self, browser: Any) -> None:
+        self._browser = browser
+
+    def new_context(self, **options: Any) -> Any:
+        return self._browser.new_context(**{"bypass_csp": True, **options})
+
+    def new_page(self, **options: Any) -> Any:
+        return self._browser.new_page(**{"bypass_csp": True, **options})
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._browser, name)
+
+
 @pytest.fixture(scope="module")
 def browser() -> Iterator[Any]:
     """Debian's chromium under Playwright; each launch gets a fresh temporary profile."""
     from chromium import launched_chromium
 
     with launched_chromium() as launched:
-        yield launched
+        yield _EvalAllowed(launched)
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

@@ -67,7 +67,9 @@ class ServerProcess:
         return f"http://127.0.0.1:{self.http_port}"
 
     def health(self) -> dict[str, Any]:
-        with urllib.request.urlopen(f"{self.http_url}/healthz", timeout=2) as response:
+        """The full /healthz (with the instructor's token: robots by name, addresses)."""
+        with urllib.request.urlopen(f"{self.http_url}/healthz?token={ADMIN_TOKEN}",
+                                    timeout=2) as response:
             return dict(json.load(response))
 
     def stop(self, timeout_s: float = 10.0) -> int:

@@ -65,6 +65,22 @@ LIVE_DOCUMENTS = ("/robot.json", "/config.json")
 CACHE_CONTROL = "no-cache"
 """Every answer is revalidated: a classroom reloads after every update (ETags make it a 304)."""
 
+CONTENT_SECURITY_POLICY = (
+    "default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
+    "img-src 'self' data: blob:; connect-src 'self' ws: wss:; object-src 'none'; "
+    "base-uri 'none'; form-action 'self'; frame-ancestors 'none'")
+"""The pages load everything from this server (offline: no CDN), run no inline script, and
+may be framed by nobody (a token page in another site's frame is a clickjacking target);
+their WebSocket is on another port, so ``connect-src`` admits ws: and wss:. Inline styles
+stay allowed: the joystick library sets them."""
+
+SECURITY_HEADERS = {
+    "Content-Security-Policy": CONTENT_SECURITY_POLICY,
+    "X-Frame-Options": "DENY",
+    "Referrer-Policy": "no-referrer",
+}
+"""On every answer: the admin pages carry the token in their URL, which no Referer may leak."""
+
 LISTEN_BACKLOG = 1024
 """Connections the kernel queues before they are accepted: 40 browsers opening 6 each at
 once fit, where the old backlog of 5 made them wait seconds for SYN retries. The kernel caps
@@ -293,7 +309,7 @@ class _Asset:
 class HttpServer:
     """The web interface's HTTP server; ``start_http`` starts one, ``close()`` stops it."""
 
-    def __init__(self, web_dir: Path, health: Callable[[], dict[str, Any]],
+    def __init__(self, web_dir: Path, health: Callable[[str | None], dict[str, Any]],
                  live: LiveDocuments, cap: int) -> None:
         self._web_dir = os.path.realpath(web_dir)
         self._health = health
@@ -336,6 +352,7 @@ class HttpServer:
                 response = web.Response(status=500, text="500: Internal Server Error")
             response.headers.setdefault("Cache-Control", CACHE_CONTROL)
             response.headers["X-Content-Type-Options"] = "nosniff"
+            response.headers.update(SECURITY_HEADERS)
             response.headers["Server"] = "websim"  # not aiohttp's and Python's versions
             await response.prepare(request)
             await response.write_eof()
@@ -348,8 +365,9 @@ class HttpServer:
             return web.Response(status=405, text="405: Method Not Allowed",
                                 headers={"Allow": "GET, HEAD"})
         path = request.path
-        if path == "/healthz":
-            return web.Response(text=json.dumps(self._health()), content_type="application/json",
+        if path == "/healthz":  # public: status and counts; the admin token: names too
+            report = self._health(request.query.get("token"))
+            return web.Response(text=json.dumps(report), content_type="application/json",
                                 headers={"Cache-Control": "no-store"})
         robot: str | None = None
         if path.startswith(ROBOTS_PREFIX):  # a class's robot: its page, with its documents
@@ -426,7 +444,7 @@ class LiveDocuments(Protocol):
 
 
 async def start_http(host: str, port: int, directory: Path,
-                     health: Callable[[], dict[str, Any]],
+                     health: Callable[[str | None], dict[str, Any]],
                      live: LiveDocuments) -> HttpServer:
     """Serve the web interface on ``host:port`` on the running event loop.
 
@@ -437,7 +455,8 @@ async def start_http(host: str, port: int, directory: Path,
         host: address to bind ("" or "0.0.0.0" for every interface).
         port: TCP port.
         directory: the web folder (``web-interface/``).
-        health: the ``/healthz`` document, called on the loop per request.
+        health: the ``/healthz`` document for the token presented (``?token=``; None:
+            none), called on the loop per request.
         live: the live ``robot.json`` and ``config.json`` and the robots of a class,
             likewise.
 

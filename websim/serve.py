@@ -21,11 +21,14 @@ from collections.abc import Callable, MutableMapping
 from pathlib import Path
 from typing import Protocol
 
+from classroom.class_server import ClassServer
+from classroom.nginx_config import parse_worker, worker_for, worker_ring
 from classroom.registry import DEFAULT_IDLE_PAUSE_S, DEFAULT_MAX_ROBOTS
+from physics import ConfigError
 from physics.shipped import shipped
 from ros_nodes.robot_interface import NODE_NAME
 from ros_nodes.robot_server import SimServer
-from rosbridge.core.limits import ClientLimits, OriginPolicy
+from rosbridge.core.limits import ClientLimits, OriginPolicy, TrustedProxies
 from rosbridge.core.schema import NAME_TOKEN
 from rosbridge.graph.names import RELAY_NODE_NAME
 from rosbridge.transport.front import start_websocket
@@ -74,6 +77,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="N",
                         help="WebSocket clients served at once; more are refused with HTTP "
                              f"503 (default {defaults.max_clients})")
+    parser.add_argument("--max-connections-per-address", type=_positive(int),
+                        default=defaults.address_max_connections, metavar="N",
+                        help="WebSocket connections one client address may hold at once; "
+                             "more are refused with HTTP 429 (default "
+                             f"{defaults.address_max_connections}: a class of 40 behind one NAT "
+                             "address, ~4 each; raise it for a larger class behind one address)")
+    parser.add_argument("--max-rate-per-address", type=_positive(float),
+                        default=defaults.address_max_rate, metavar="N",
+                        help="messages/s all the connections of one client address may send "
+                             "together; beyond it their frames wait (default "
+                             f"{defaults.address_max_rate:g}; raise it with "
+                             "--max-connections-per-address)")
+    parser.add_argument("--trusted-proxy", action="append", default=[], metavar="ADDR[/BITS]",
+                        help="a reverse proxy (nginx) whose X-Real-IP / X-Forwarded-For name "
+                             "the client, so per-address budgets apply to students, not to "
+                             "the proxy; repeatable. Default: none (those headers are ignored)")
     parser.add_argument("--allow-origin", action="append", default=[], metavar="URL",
                         help="also accept browser pages from this origin (e.g. "
                              "http://robot.example:8080); repeatable; '*' accepts any page. "
@@ -114,6 +133,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--worker", action="store_true",
                         help="with --class: one of several processes behind nginx (websim "
                              "nginx-config): a robot is made when first routed here")
+    parser.add_argument("--worker-index", type=int, default=None, metavar="K",
+                        help="with --worker and --workers: this worker is the K-th (0-based) "
+                             "of websim nginx-config --workers; it makes only the robots nginx "
+                             "routes to it, and refuses other names (404)")
+    parser.add_argument("--workers", nargs="+", default=None, metavar="HOST:HTTP:WS",
+                        help="with --worker-index: every worker, as given to websim "
+                             "nginx-config --workers, in the same order")
     parser.add_argument("--public-ws-port", type=int, default=None, metavar="PORT",
                         help="the WebSocket port students reach (a proxy's) for the pages' "
                              "config.json and the links file (default --ws-port)")
@@ -153,7 +179,39 @@ def _url_host(host: str) -> str:
 def limits_from(args: argparse.Namespace) -> ClientLimits:
     """The client limits the options ask for."""
     return ClientLimits(max_rate=args.max_rate, max_frame_bytes=args.max_frame_bytes,
-                        max_queued_bytes=args.max_queued_bytes, max_clients=args.max_clients)
+                        max_queued_bytes=args.max_queued_bytes, max_clients=args.max_clients,
+                        address_max_connections=args.max_connections_per_address,
+                        address_max_rate=args.max_rate_per_address)
+
+
+def owned_names(args: argparse.Namespace) -> Callable[[str], bool] | None:
+    """``--worker-index K --workers ...``: whether nginx routes a robot's name to this worker.
+
+    Raises:
+        ConfigError: one without the other, or K not one of the workers.
+    """
+    index, workers = getattr(args, "worker_index", None), getattr(args, "workers", None)
+    if index is None and workers is None:
+        return None
+    if index is None or not workers:
+        raise ConfigError("--worker-index and --workers go together")
+    peers = [parse_worker(text) for text in workers]
+    if not 0 <= index < len(peers):
+        raise ConfigError(f"--worker-index {index}: there are {len(peers)} workers (0-based)")
+    ring = worker_ring(peers)
+    return lambda name: worker_for(name, ring) == index
+
+
+def proxies_from(args: argparse.Namespace) -> TrustedProxies:
+    """The trusted proxies the options name (``--trusted-proxy``).
+
+    Raises:
+        ConfigError: one is no address or network.
+    """
+    try:
+        return TrustedProxies.parse(args.trusted_proxy)
+    except ValueError as error:
+        raise ConfigError(f"--trusted-proxy: {error}") from None
 
 
 def origins_from(args: argparse.Namespace) -> OriginPolicy:
@@ -164,13 +222,19 @@ def origins_from(args: argparse.Namespace) -> OriginPolicy:
 async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int:
     """Run until SIGINT or SIGTERM; returns the exit code."""
     server = site.front
+    server.proxies = proxies_from(args)
+    if isinstance(server, ClassServer):
+        server.owns = owned_names(args)
+    server.refusals.install()
     robot = site.robot
     try:
         websocket = await start_websocket(server, args.host, args.ws_port)
     except OSError as error:
         return _port_error("WebSocket", args.host, args.ws_port, error)
     try:
-        http = await start_http(args.host, args.http_port, args.web_dir, server.health, site)
+        http = await start_http(
+            args.host, args.http_port, args.web_dir,
+            lambda token: server.health(full=server.is_admin_token(token)), site)
     except OSError as error:
         websocket.close()
         return _port_error("HTTP", args.host, args.http_port, error)

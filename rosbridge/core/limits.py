@@ -1,13 +1,17 @@
-"""Per-connection limits of the embedded server: what a client may hold, send and cost.
+"""Limits of the embedded server: what a connection, an address and a server may hold and cost.
 
-``ClientLimits`` is the one definition of every bound (the README's limits table); the token
-buckets enforce the rates; ``OriginPolicy`` decides which web pages may connect. No I/O here:
-the server and the bridge ask, and close or refuse themselves.
+``ClientLimits`` is the one definition of every bound (the README's limits table): per
+connection, per client address (all the connections of one machine, or of one classroom
+behind one NAT address: ``AddressBudgets``), per robot and per server. The token buckets
+enforce the rates; ``OriginPolicy`` decides which web pages may connect; ``TrustedProxies``
+which peers may say whom they forward (``X-Real-IP``, ``X-Forwarded-For``). No I/O here: the
+server and the bridge ask, and close, refuse or wait themselves.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import ipaddress
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -67,6 +71,24 @@ class ClientLimits:
         max_replies: replies (service responses, statuses) that may wait at once.
         max_clients: connections one robot serves at once; beyond it the handshake is
             refused (HTTP 503), so sockets are bounded whatever the file limit.
+        max_connections: WebSocket connections the whole server holds at once; beyond it
+            the handshake is refused (HTTP 503).
+        address_max_connections: WebSocket connections one client address may hold at once
+            on the server (sized for a class of 40 behind one NAT address: a page, their code
+            and a second tab each, about 4, plus the instructor's); beyond it the handshake
+            is refused (HTTP 429). The instructor's root view does not count.
+        address_max_robot_connections: connections one address may hold to one robot;
+            beyond it HTTP 429, so no address can fill a robot's ``max_clients``.
+        address_max_rate: messages/s all the connections of one address may send together
+            (a frame counts as in ``max_rate``; one second of burst); beyond it their frames
+            wait (their sockets back up), nobody is closed.
+        address_handling_share: fraction of one core the server spends on one address's
+            input, all its connections together; beyond it their frames wait.
+        address_bytes_per_s: incoming bytes/s of one address, all its connections together
+            (one second of burst, at least ``max_frame_bytes``); beyond it their frames wait.
+        address_enrolments: new robots one address may enrol in an open class at once
+            (burst); beyond it the handshake is refused (HTTP 429) until the budget refills.
+        address_enrolments_per_s: how fast that budget refills (enrolments/s).
     """
 
     max_rate: float = DEFAULT_MAX_RATE
@@ -90,6 +112,14 @@ class ClientLimits:
     close_timeout_s: float = 3.0
     max_replies: int = 1000
     max_clients: int = 500
+    max_connections: int = 4000
+    address_max_connections: int = 200
+    address_max_robot_connections: int = 32
+    address_max_rate: float = 2000.0
+    address_handling_share: float = 0.25
+    address_bytes_per_s: int = 8 << 20
+    address_enrolments: int = 60
+    address_enrolments_per_s: float = 1.0
 
     def __post_init__(self) -> None:
         for item in dataclasses.fields(self):
@@ -141,6 +171,10 @@ class TokenBucket:
         tokens = self._refill()
         return 0.0 if tokens >= 0 else -tokens / self.rate
 
+    def full(self) -> bool:
+        """Whether the bucket holds its whole burst."""
+        return self._refill() >= self.burst
+
 
 class RateLimit:
     """A client's message rate: ``rate`` messages per second sustained, bursts of ``rate``.
@@ -169,6 +203,181 @@ class RateLimit:
     def reason(self) -> str:
         """The close reason sent to a client that exceeded the rate."""
         return f"rate limit: more than {self.rate:g} messages/s"
+
+
+class AddressBudget:
+    """What all the connections of one client address spend together (``ClientLimits``).
+
+    Connections are counted (on the server and per robot); messages, handling time and bytes
+    are charged to shared token buckets that may go into debt, and a connection of an
+    address in debt waits (``wait_s``) before its next frame is handled; enrolments in an
+    open class are taken from a bucket of their own.
+    """
+
+    def __init__(self, limits: ClientLimits, clock: Callable[[], float]) -> None:
+        self.connections = 0
+        self.robots: dict[str, int] = {}
+        self._rate = TokenBucket(limits.address_max_rate, limits.address_max_rate, clock)
+        self._handling = TokenBucket(limits.address_handling_share,
+                                     max(limits.handling_burst_s,
+                                         limits.address_handling_share * 2), clock)
+        byte_burst = max(limits.address_bytes_per_s, limits.max_frame_bytes)
+        self._bytes = TokenBucket(limits.address_bytes_per_s, byte_burst, clock)
+        self._enrolments = TokenBucket(limits.address_enrolments_per_s,
+                                       limits.address_enrolments, clock)
+
+    def wait_s(self) -> float:
+        """How long this address's next frame must wait (0: now)."""
+        return max(self._rate.wait_s(), self._handling.wait_s(), self._bytes.wait_s())
+
+    def charge(self, frame_bytes: int, handling_s: float) -> None:
+        """Charge one handled frame: its message cost, its bytes and the time it took."""
+        self._rate.charge(RateLimit.cost(frame_bytes))
+        self._bytes.charge(frame_bytes)
+        self._handling.charge(handling_s)
+
+    def enrol(self) -> bool:
+        """Take one enrolment; False if this address enrolled too many too fast."""
+        return self._enrolments.take(1)
+
+    def idle(self) -> bool:
+        """No connection, and nothing spent that has not refilled: it can be forgotten."""
+        return (self.connections == 0 and self.wait_s() == 0.0
+                and self._enrolments.full())
+
+
+class AddressBudgets:
+    """Every client address's ``AddressBudget``, and the server's connection count.
+
+    ``refusal`` says why a new connection is refused (None: admitted); ``opened`` and
+    ``closed`` count it. Addresses with nothing outstanding are forgotten, so the table is
+    bounded by the connections (and the recent enrolments) the server holds.
+
+    Args:
+        limits: the bounds (``address_*``, ``max_connections``).
+        clock: monotonic time (s).
+    """
+
+    def __init__(self, limits: ClientLimits,
+                 clock: Callable[[], float] = WALL_CLOCK.monotonic_s) -> None:
+        self.limits = limits
+        self.connections = 0
+        self._clock = clock
+        self._budgets: dict[str, AddressBudget] = {}
+
+    def __len__(self) -> int:
+        return len(self._budgets)
+
+    def of(self, address: str) -> AddressBudget:
+        """The budget of ``address`` (made now if it has none)."""
+        budget = self._budgets.get(address)
+        if budget is None:
+            if len(self._budgets) >= 1024:
+                self._forget_idle()
+            budget = self._budgets[address] = AddressBudget(self.limits, self._clock)
+        return budget
+
+    def _forget_idle(self) -> None:
+        for address in [a for a, budget in self._budgets.items() if budget.idle()]:
+            del self._budgets[address]
+
+    def refusal(self, address: str, robot: str | None) -> tuple[int, str] | None:
+        """(HTTP status, reason) refusing one more connection of ``address`` to ``robot``."""
+        limits = self.limits
+        if self.connections >= limits.max_connections:
+            return 503, (f"this server holds at most {limits.max_connections} connections "
+                         "at once; try again later")
+        budget = self._budgets.get(address)
+        if budget is None:
+            return None
+        if budget.connections >= limits.address_max_connections:
+            return 429, (f"at most {limits.address_max_connections} connections from one "
+                         "address (websim serve --max-connections-per-address raises it)")
+        if robot is not None and budget.robots.get(robot, 0) >= \
+                limits.address_max_robot_connections:
+            return 429, (f"at most {limits.address_max_robot_connections} connections from "
+                         "one address to one robot")
+        return None
+
+    def opened(self, address: str, robot: str | None) -> AddressBudget:
+        """Count a connection of ``address`` (to ``robot``); its budget."""
+        budget = self.of(address)
+        budget.connections += 1
+        self.connections += 1
+        if robot is not None:
+            budget.robots[robot] = budget.robots.get(robot, 0) + 1
+        return budget
+
+    def closed(self, address: str, robot: str | None) -> None:
+        """Count a connection of ``address`` (to ``robot``) gone."""
+        budget = self._budgets.get(address)
+        self.connections -= 1
+        if budget is None:
+            return
+        budget.connections -= 1
+        if robot is not None:
+            left = budget.robots.get(robot, 1) - 1
+            if left > 0:
+                budget.robots[robot] = left
+            else:
+                budget.robots.pop(robot, None)
+
+
+Network = ipaddress.IPv4Network | ipaddress.IPv6Network
+
+
+@dataclass(frozen=True)
+class TrustedProxies:
+    """Which peers are our reverse proxies (``--trusted-proxy``), trusted to name the client.
+
+    Behind nginx every connection comes from nginx; ``websim nginx-config`` sets
+    ``X-Real-IP`` and ``X-Forwarded-For``. Those headers are believed only from these
+    addresses: from anyone else they are a client's claim, and ignored.
+
+    Attributes:
+        networks: the proxies' addresses or networks (``10.0.0.5``, ``10.0.0.0/24``).
+    """
+
+    networks: tuple[Network, ...] = ()
+
+    @classmethod
+    def parse(cls, texts: Iterable[str]) -> TrustedProxies:
+        """From ``--trusted-proxy`` values; ValueError for one that is no address/network."""
+        return cls(tuple(ipaddress.ip_network(text.strip(), strict=False) for text in texts))
+
+    def trusts(self, address: str) -> bool:
+        """Whether ``address`` is one of the proxies."""
+        try:
+            ip = ipaddress.ip_address(address)
+        except ValueError:
+            return False
+        return any(ip in network for network in self.networks)
+
+    def client(self, peer: str, real_ip: str | None, forwarded_for: str | None) -> str:
+        """The client's address: the peer's, or the one a trusted proxy names.
+
+        ``X-Real-IP`` first; else the last address of ``X-Forwarded-For`` that is not a
+        proxy's (the ones before it are the client's own claims).
+        """
+        if not self.networks or not self.trusts(peer):
+            return peer
+        if real_ip and _is_ip(real_ip.strip()):
+            return real_ip.strip()
+        if forwarded_for:
+            for hop in reversed([hop.strip() for hop in forwarded_for.split(",")]):
+                if not _is_ip(hop):
+                    break
+                if not self.trusts(hop):
+                    return hop
+        return peer
+
+
+def _is_ip(text: str) -> bool:
+    try:
+        ipaddress.ip_address(text)
+    except ValueError:
+        return False
+    return True
 
 
 ANY_ORIGIN = "*"

@@ -19,7 +19,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.protocol import State
 
 from rosbridge.core.clock import WALL_CLOCK, Clock
-from rosbridge.core.limits import ClientLimits, RateLimit, TokenBucket
+from rosbridge.core.limits import AddressBudget, ClientLimits, RateLimit, TokenBucket
 from rosbridge.core.outbox import Frame, Outbox
 from rosbridge.core.session import Flush, Session
 from rosbridge.transport.schedule import Schedule
@@ -91,11 +91,13 @@ class BridgeConnection:
         wire: where its frames are serialized (shared with the clients of the same server,
             so a message is framed once).
         clock: the clock of its budgets and its watchdog (default: wall time).
+        address: what all the connections of its client address spend together (messages,
+            handling time, bytes); None: only its own budgets (the instructor's root view).
     """
 
     def __init__(self, hub: Hub, schedule: Schedule, connection: ServerConnection, peer: str,
                  is_admin: bool, limits: ClientLimits, wire: WireFrames | None = None,
-                 clock: Clock = WALL_CLOCK) -> None:
+                 clock: Clock = WALL_CLOCK, address: AddressBudget | None = None) -> None:
         self._schedule = schedule
         self._writers: Writers = schedule.writers
         self._bridge = hub
@@ -110,6 +112,10 @@ class BridgeConnection:
         self._rate = RateLimit(limits.max_rate, clock.monotonic_s)
         self._handling = TokenBucket(limits.handling_share, limits.handling_burst_s,
                                      clock.monotonic_s)
+        self._address = address
+        self._held_until_s = 0.0
+        """Until when frames read may be a backlog its address's budget held back (then
+        reading them faster than ``max_rate`` is no flood of the client's)."""
         self._handed_bytes = 0
         self._closing: asyncio.Task[None] | None = None
         self._pacing = False
@@ -141,16 +147,26 @@ class BridgeConnection:
         try:
             async for frame in self._connection:
                 if not self._rate.allow(len(frame)):
-                    self._close(POLICY_VIOLATION, self._rate.reason(), FLOOD_CLOSE_TIMEOUT_S)
-                    return  # its further frames are not even read: the close ends it
+                    if self._clock.monotonic_s() < self._held_until_s:  # we held it back:
+                        await asyncio.sleep(1.0 / self._limits.max_rate)  # its backlog, read
+                    else:
+                        self._close(POLICY_VIOLATION, self._rate.reason(),
+                                    FLOOD_CLOSE_TIMEOUT_S)
+                        return  # its further frames are not even read: the close ends it
                 wait_s = self._handling.wait_s()
+                if self._address is not None and (held_s := self._address.wait_s()) > 0:
+                    wait_s = max(wait_s, held_s)  # its address's budget: all its connections'
+                    self._held_until_s = self._clock.monotonic_s() + held_s + 1.0
                 if wait_s > 0:  # its budget is spent: its frames wait, its socket backs up
                     await asyncio.sleep(wait_s)
                 if len(frame) >= LARGE_FRAME_BYTES:  # handled between ticks, not across one
                     await self._schedule.room(len(frame) * HANDLING_S_PER_BYTE)
                 started = time.perf_counter()
                 self._writers.write(self._bridge.handle(self.session, frame))
-                self._handling.charge(time.perf_counter() - started)
+                handling_s = time.perf_counter() - started
+                self._handling.charge(handling_s)
+                if self._address is not None:
+                    self._address.charge(len(frame), handling_s)
         except ConnectionClosed:
             pass
 

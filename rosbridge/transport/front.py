@@ -32,8 +32,14 @@ from websockets.http11 import Request, Response
 
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.clock import WALL_CLOCK, Clock
-from rosbridge.core.limits import ClientLimits, OriginPolicy
-from rosbridge.transport.connection import BridgeConnection, Hub
+from rosbridge.core.limits import AddressBudgets, ClientLimits, OriginPolicy, TrustedProxies
+from rosbridge.transport.connection import (
+    MAX_CLOSE_REASON_BYTES,
+    POLICY_VIOLATION,
+    BridgeConnection,
+    Hub,
+)
+from rosbridge.transport.log_limits import LogThrottle
 from rosbridge.transport.schedule import Schedule
 from rosbridge.transport.wire import WireFrames
 
@@ -70,15 +76,23 @@ class WebSocketFront(abc.ABC):
         limits: the bounds every client lives within.
         origins: which web pages may connect; None: any (tests and benchmarks).
         clock: the clock of uptime, client budgets and watchdogs (default: wall time).
+        proxies: the reverse proxies whose ``X-Real-IP``/``X-Forwarded-For`` name the client
+            (``--trusted-proxy``); default none: the peer is the client.
     """
 
     def __init__(self, admin_token: str, limits: ClientLimits | None = None,
-                 origins: OriginPolicy | None = None, clock: Clock = WALL_CLOCK) -> None:
+                 origins: OriginPolicy | None = None, clock: Clock = WALL_CLOCK,
+                 proxies: TrustedProxies | None = None) -> None:
         self.limits = limits or ClientLimits()
         self._admin_token = admin_token
         self._origins = origins
+        self.proxies = proxies or TrustedProxies()
+        self.addresses = AddressBudgets(self.limits, clock.monotonic_s)
+        """What each client address holds and spends, all its connections together."""
         self.clock = clock
         self.started_monotonic_s = clock.monotonic_s()
+        self.refusals = LogThrottle(log, clock)
+        """Refusals logged once per kind and address per interval, with a count."""
         self.wire = WireFrames()
         """Outgoing frames serialized once for all the clients they go to."""
 
@@ -107,8 +121,11 @@ class WebSocketFront(abc.ABC):
         return True
 
     @abc.abstractmethod
-    def health(self) -> dict[str, Any]:
-        """The /healthz document."""
+    def health(self, full: bool = True) -> dict[str, Any]:
+        """The /healthz document.
+
+        ``full`` False (public): status and counts only, no robot's name, no address.
+        """
 
     @abc.abstractmethod
     async def run_ticks(self) -> None:
@@ -120,67 +137,115 @@ class WebSocketFront(abc.ABC):
             return False
         return hmac.compare_digest(token.encode(), self._admin_token.encode())
 
+    def admit(self, name: str | None, address: str) -> tuple[int, str] | None:
+        """A subclass's last word on a handshake that would make a robot.
+
+        Called after every other check, so the place to spend a budget (an enrolment):
+        nothing refuses after it. Returns (HTTP status, reason) refusing it, or None.
+        """
+        return None
+
+    def client_address(self, connection: ServerConnection, request: Request) -> str:
+        """The client's address: the peer's, or what a trusted proxy says it forwards."""
+        return self.proxies.client(_host(connection), request.headers.get("X-Real-IP"),
+                                   request.headers.get("X-Forwarded-For"))
+
     def process_request(self, connection: ServerConnection,
                         request: Request) -> Response | None:
-        """Answer ``GET /healthz``; refuse unknown robots, full robots and other origins.
+        """Answer ``GET /healthz``; refuse what must be refused before anything changes.
 
-        Unknown robots get 404, a robot at ``max_clients`` 503, another site's page 403.
+        Another site's page gets 403, an unknown robot 404, an address over its connection
+        or enrolment budget 429, a robot at ``max_clients`` or a full server 503.
         """
         target = urlsplit(request.path)
         path = target.path
+        token = _token(target.query)
         if path == "/healthz":
-            return json_response(self.health())
-        if self.root_view(path, _token(target.query)) is not None:
-            return self._check_origin(connection, request)
-        routed = self.route(path)
+            return json_response(self.health(full=self.is_admin_token(token)))
+        address = self.client_address(connection, request)
+        refused = self._check_origin(connection, request, address)
+        if refused is not None:
+            return refused
+        if self.root_view(path, token) is not None:
+            return None
+        routed = self.find(path)
         if isinstance(routed, str):
-            log.warning("refused a WebSocket from %s for %s: %s", _peer(connection),
-                        path[:80], routed)
-            return connection.respond(http.HTTPStatus.NOT_FOUND, f"{routed}\n")
-        host, _ = routed
-        if len(host.bridge.sessions) >= self.limits.max_clients:
-            log.warning("refused a WebSocket from %s: %d clients already (the limit)",
-                        _peer(connection), self.limits.max_clients)
-            return connection.respond(http.HTTPStatus.SERVICE_UNAVAILABLE,
-                                      f"this robot serves at most {self.limits.max_clients} "
-                                      "clients at once; try again later\n")
-        return self._check_origin(connection, request)
+            return self._refuse(connection, address, http.HTTPStatus.NOT_FOUND, routed,
+                                "not found")
+        host, name = routed
+        if host is not None and len(host.bridge.sessions) >= self.limits.max_clients:
+            return self._refuse(connection, address, http.HTTPStatus.SERVICE_UNAVAILABLE,
+                                f"this robot serves at most {self.limits.max_clients} "
+                                "clients at once; try again later", "max_clients")
+        over = self.addresses.refusal(address, name)
+        if over is None and host is None:
+            over = self.admit(name, address)
+        if over is not None:
+            status, reason = over
+            return self._refuse(connection, address, http.HTTPStatus(status), reason,
+                                reason.partition(" (")[0])
+        return None
 
-    def _check_origin(self, connection: ServerConnection,
-                      request: Request) -> Response | None:
+    def find(self, path: str) -> tuple[Destination | None, str | None] | str:
+        """The robot a path names, making none.
+
+        Returns:
+            (host, name), host None for a robot ``route`` would make; or why there is none.
+        """
+        return self.route(path)
+
+    def _refuse(self, connection: ServerConnection, address: str, status: http.HTTPStatus,
+                reason: str, kind: str) -> Response:
+        """The refusal ``reason`` with ``status``, logged once per kind and address a while."""
+        self.refusals.note(address, kind, f"refused a WebSocket ({status.value}): {reason}")
+        return connection.respond(status, f"{reason}\n")
+
+    def _check_origin(self, connection: ServerConnection, request: Request,
+                      address: str) -> Response | None:
         origin = request.headers.get("Origin")
         if self._origins is not None and not self._origins.allows(
                 origin, request.headers.get("Host")):
-            log.warning("refused a WebSocket from %s: origin %s is not allowed "
-                        "(websim serve --allow-origin %s admits it)",
-                        _peer(connection), origin, origin)
-            return connection.respond(http.HTTPStatus.FORBIDDEN,
-                                      f"origin {origin} is not allowed\n")
+            return self._refuse(connection, address, http.HTTPStatus.FORBIDDEN,
+                                f"origin {origin} is not allowed (websim serve "
+                                f"--allow-origin {origin} admits it)", "origin")
         return None
 
     async def handle_connection(self, connection: ServerConnection) -> None:
         """Serve one client until it goes."""
-        peer = _peer(connection)
-        target = urlsplit(connection.request.path if connection.request else "")
+        request = connection.request
+        if request is None:  # pragma: no cover - websockets always has one here
+            return
+        address = self.client_address(connection, request)
+        peer = _peer(connection, address)
+        target = urlsplit(request.path)
         token = _token(target.query)
         view = self.root_view(target.path, token)
         if view is not None:
             log.info("instructor %s connected to the class's root view", peer)
             hub, schedule = view
             await BridgeConnection(hub, schedule, connection, peer, True,
-                                   self.limits, self.wire, self.clock).run()
+                                   self.root_limits(), self.wire, self.clock).run()
             return
         routed = self.route(target.path)
-        if isinstance(routed, str):  # pragma: no cover - refused at the handshake
+        if isinstance(routed, str):  # refused at the handshake, or gone since
+            await connection.close(POLICY_VIOLATION, routed[:MAX_CLOSE_REASON_BYTES])
             return
         host, name = routed
         is_admin = self.is_admin_token(token) or self.robot_admin(name, token)
         if token and not is_admin:
-            log.warning("client %s presented a wrong admin token", peer)
-        client = BridgeConnection(host.bridge, host.schedule, connection, peer, is_admin,
-                                  self.limits, self.wire, self.clock)
-        client.session.may_drive = self.may_drive(name, is_admin)
-        await client.run()
+            self.refusals.note(address, "token", "presented a wrong admin token")
+        budget = self.addresses.opened(address, name)
+        try:
+            client = BridgeConnection(host.bridge, host.schedule, connection, peer, is_admin,
+                                      self.limits, self.wire, self.clock, budget)
+            client.session.may_drive = self.may_drive(name, is_admin)
+            await client.run()
+        finally:
+            self.addresses.closed(address, name)
+
+    def root_limits(self) -> ClientLimits:
+        """The limits of the instructor's root view (default: a client's)."""
+        return self.limits
 
     def _uptime_s(self) -> float:
         return round(self.clock.monotonic_s() - self.started_monotonic_s, 3)
@@ -199,10 +264,19 @@ def _token(query: str) -> str | None:
     return parse_qs(query).get("token", [None])[0]
 
 
-def _peer(connection: ServerConnection) -> str:
+def _host(connection: ServerConnection) -> str:
+    """The peer's IP address."""
     address = connection.remote_address
     if isinstance(address, tuple) and len(address) >= 2:
-        return f"{address[0]}:{address[1]}"
+        return str(address[0])
+    return str(address)
+
+
+def _peer(connection: ServerConnection, client: str | None = None) -> str:
+    """``ADDRESS:PORT`` for logs: the client's address (a proxy's client's), the peer's port."""
+    address = connection.remote_address
+    if isinstance(address, tuple) and len(address) >= 2:
+        return f"{client or address[0]}:{address[1]}"
     return str(address)
 
 
