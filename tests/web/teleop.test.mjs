@@ -4,7 +4,7 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  keyDemand, keysBelongToElement, PUBLISH_PERIOD_MS, Teleop,
+  keyDemand, keysBelongToElement, PUBLISH_PERIOD_MS, spaceBelongsToElement, Teleop,
 } from '../../web-interface/js/teleop.js';
 import { createState } from '../../web-interface/js/state.js';
 import { robot } from './robot.mjs';
@@ -29,6 +29,15 @@ test('text fields, selects and sliders keep the keys; buttons do not', () => {
   assert.equal(keysBelongToElement({ tagName: 'BUTTON' }), false);
   assert.equal(keysBelongToElement({ tagName: 'BODY' }), false);
   assert.equal(keysBelongToElement(null), false);
+});
+
+test('a space is typed into text fields only: on a slider, a button or a checkbox it stops', () => {
+  assert.equal(spaceBelongsToElement({ tagName: 'INPUT', type: 'text' }), true);
+  assert.equal(spaceBelongsToElement({ tagName: 'TEXTAREA' }), true);
+  assert.equal(spaceBelongsToElement({ tagName: 'INPUT', type: 'range' }), false);
+  assert.equal(spaceBelongsToElement({ tagName: 'INPUT', type: 'checkbox' }), false);
+  assert.equal(spaceBelongsToElement({ tagName: 'BUTTON' }), false);
+  assert.equal(spaceBelongsToElement(null), false);
 });
 
 function fakeConnection() {
