@@ -180,8 +180,10 @@ def nginx_config(workers: list[Worker], http_listen: str, ws_listen: str) -> str
 # http://HOST:{http_port}{ROBOTS_PREFIX}NAME/, on the worker its name hashes to.
 # The dashboard, http://HOST:{http_port}/class, reads /workers.json and opens each
 # worker's root view at ws://HOST:{ws_port}/workers/K/?token=INSTRUCTOR.
-# Start each worker with --trusted-proxy NGINX_ADDRESS, so it reads the client's address
-# from X-Real-IP and budgets each student, not nginx, per address.
+# Start worker K (0-based, in this order) with --trusted-proxy NGINX_ADDRESS (it then reads
+# the client's address from X-Real-IP: per-address budgets are each student's, not nginx's)
+# and --worker-index K --workers {" ".join(f"{w.host}:{w.http_port}:{w.ws_port}" for w in workers)}
+# (it then makes only the robots this nginx routes to it).
 worker_processes auto;
 events {{
     worker_connections 4096;
