@@ -223,3 +223,13 @@ def test_address_budgets_count_connections_and_forget_idle_addresses() -> None:
     assert budget.wait_s() > 0.0 and not budget.idle()
     now[0] += 60.0
     assert budget.idle()
+
+
+def test_an_ipv6_64_is_one_address() -> None:
+    """A machine or a home gets a whole /64: its addresses share one budget."""
+    budgets = AddressBudgets(ClientLimits(address_max_connections=1))
+    budgets.opened("2001:db8:0:1::5", "r1")
+    assert budgets.refusal("2001:db8:0:1::6", "r2") is not None
+    assert budgets.refusal("2001:db8:0:2::6", "r2") is None
+    budgets.closed("2001:db8:0:1::5", "r1")
+    assert budgets.refusal("2001:db8:0:1::6", "r2") is None

@@ -270,6 +270,7 @@ class AddressBudgets:
 
     def of(self, address: str) -> AddressBudget:
         """The budget of ``address`` (made now if it has none)."""
+        address = budget_key(address)
         budget = self._budgets.get(address)
         if budget is None:
             if len(self._budgets) >= 1024:
@@ -287,7 +288,7 @@ class AddressBudgets:
         if self.connections >= limits.max_connections:
             return 503, (f"this server holds at most {limits.max_connections} connections "
                          "at once; try again later")
-        budget = self._budgets.get(address)
+        budget = self._budgets.get(budget_key(address))
         if budget is None:
             return None
         if budget.connections >= limits.address_max_connections:
@@ -310,7 +311,7 @@ class AddressBudgets:
 
     def closed(self, address: str, robot: str | None) -> None:
         """Count a connection of ``address`` (to ``robot``) gone."""
-        budget = self._budgets.get(address)
+        budget = self._budgets.get(budget_key(address))
         self.connections -= 1
         if budget is None:
             return
@@ -321,6 +322,19 @@ class AddressBudgets:
                 budget.robots[robot] = left
             else:
                 budget.robots.pop(robot, None)
+
+
+def budget_key(address: str) -> str:
+    """Whose budget an address spends: its own for IPv4, its /64 for IPv6.
+
+    One machine or one home gets a whole /64: its addresses are one client's.
+    """
+    if ":" not in address:
+        return address
+    try:
+        return str(ipaddress.IPv6Network(f"{address}/64", strict=False))
+    except ValueError:
+        return address
 
 
 Network = ipaddress.IPv4Network | ipaddress.IPv6Network
