@@ -5,7 +5,7 @@ A real ``websim serve --class N`` on 127.0.0.1. The attacker's connections come 
 so the server sees two client addresses, as it would see two machines.
 
 * **flood**: ``--flooders`` (80) connections from the attacker, spread over three robots of
-  its own (robot01, robot22, robot23: at most 32 connections from one address reach one
+  its own (robot01, robot22, robot23: at most 64 connections from one address reach one
   robot, ``address_max_robot_connections``), each publishing ``/cmd_vel`` at
   ``--flood-rate`` (190 messages/s: within the per-connection ``max_rate`` of 200, so no
   single one is ever closed), while each of 20 other robots has one healthy client

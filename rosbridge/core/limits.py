@@ -77,8 +77,10 @@ class ClientLimits:
             on the server (sized for a class of 40 behind one NAT address: a page, their code
             and a second tab each, about 4, plus the instructor's); beyond it the handshake
             is refused (HTTP 429). The instructor's root view does not count.
-        address_max_robot_connections: connections one address may hold to one robot;
-            beyond it HTTP 429, so no address can fill a robot's ``max_clients``.
+        address_max_robot_connections: connections one address may hold to one robot
+            (a class of 40 behind one NAT address all watching the instructor's demo robot,
+            some with their code too); beyond it HTTP 429, so no address can fill a
+            robot's ``max_clients``.
         address_max_rate: messages/s all the connections of one address may send together
             (a frame counts as in ``max_rate``; one second of burst); beyond it their frames
             wait (their sockets back up), nobody is closed.
@@ -114,7 +116,7 @@ class ClientLimits:
     max_clients: int = 500
     max_connections: int = 4000
     address_max_connections: int = 200
-    address_max_robot_connections: int = 32
+    address_max_robot_connections: int = 64
     address_max_rate: float = 2000.0
     address_handling_share: float = 0.25
     address_bytes_per_s: int = 8 << 20
