@@ -21,7 +21,7 @@ from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from rosbridge.core.limits import AddressBudgets, ClientLimits, TrustedProxies
 
-from server_process import ServerProcess, start_server
+from server_process import ADMIN_TOKEN, ServerProcess, start_server
 from ws_clients import OdomListener
 
 ATTACKER = "127.0.0.2"
@@ -238,3 +238,30 @@ def test_an_ipv6_64_is_one_address() -> None:
     assert budgets.refusal("2001:db8:0:2::6", "r2") is None
     budgets.closed("2001:db8:0:1::5", "r1")
     assert budgets.refusal("2001:db8:0:1::6", "r2") is None
+
+
+def test_a_class_of_40_behind_one_nat_address_gets_in_with_the_defaults() -> None:
+    """40 students behind one address, each with a page, their code and a second tab and a
+    spare (4 connections: 160), and the instructor's root view from the same address: all
+    admitted at the default per-address limits."""
+    running = start_server(["--class", "40"])
+    try:
+        async def classroom() -> None:
+            opened: list[Any] = []
+            try:
+                for k in range(1, 41):
+                    url = f"ws://127.0.0.1:{running.ws_port}/robots/robot{k:02d}"
+                    opened += await asyncio.gather(*(open_from(url, ATTACKER)
+                                                     for _ in range(4)))
+                refused = [o for o in opened if not isinstance(o, ClientConnection)]
+                assert refused == []
+                root = await open_from(f"ws://127.0.0.1:{running.ws_port}/?token="
+                                       f"{ADMIN_TOKEN}", ATTACKER)
+                opened.append(root)
+                assert isinstance(root, ClientConnection)
+                assert running.health()["clients"] >= 160
+            finally:
+                await close_all(opened)
+        asyncio.run(classroom())
+    finally:
+        running.stop()
