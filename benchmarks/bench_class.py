@@ -44,9 +44,9 @@ and wait is bounded. It asserts nothing.
 
 Run it from the checkout::
 
-    python benchmarks/classroom.py                         # N = 40 and 100, separate at 40
-    python benchmarks/classroom.py --robots 40 --seconds 20 --json
-    python benchmarks/classroom.py --robots 40 100 --search
+    python benchmarks/bench_class.py                         # N = 40 and 100, separate at 40
+    python benchmarks/bench_class.py --robots 40 --seconds 20 --json
+    python benchmarks/bench_class.py --robots 40 100 --search
 """
 
 from __future__ import annotations

@@ -17,7 +17,8 @@ import pytest
 
 from ros_nodes.parameters import markdown_table
 from ros_nodes.robot_description import robot_json
-from rosbridge.core import encoding, schema
+from rosbridge.core import encoding, fragments, schema
+from rosbridge.core.capabilities import services, topics
 from rosbridge.core.limits import ClientLimits
 from rosbridge.transport import connection
 from websim.cli import main
@@ -60,9 +61,30 @@ def test_readme_limits_table_states_the_defaults_in_force() -> None:
             f"{limits.max_partial_messages}; one that gets no fragment for "
             f"{limits.fragment_timeout_s:g} s",
         "a message published with `latch: true`": f"{limits.max_latched_bytes >> 10} KiB",
-        "bytes/s a client's publications are relayed to others":
-            f"{limits.relay_bytes_per_s >> 10} KiB/s",
+        "bytes/s a client relays to others: publications, service calls and responses, "
+        "goals, feedback, results": f"{limits.relay_bytes_per_s >> 10} KiB/s",
+        "clients' latched messages per robot (a client's latched message goes when its "
+        "publisher unadvertises or leaves)": f"{topics.MAX_LATCHED_BYTES_PER_ROBOT >> 20} MiB",
+        "calls waiting for client-provided services":
+            f"{services.MAX_PENDING_CALLS_PER_CLIENT} per caller, "
+            f"{services.MAX_PENDING_CALLS_PER_SERVICE} per service",
+        "`fragment_size` of a topic message": "rounded down to a power of two, at least "
+                                              f"{fragments.MIN_TOPIC_FRAGMENT_SIZE} characters",
+        "costly forms of one message kept (`png`, `cbor-raw`, fragmented)":
+            f"{topics.MAX_VARIANTS}, together at most {topics.VARIANT_BYTES_FACTOR} × its JSON",
         "clients per robot": f"{limits.max_clients}",
+        "WebSocket connections per server": f"{limits.max_connections}",
+        "connections from one client address (IPv6: its /64; behind `--trusted-proxy`, the "
+        "forwarded address); the instructor's root view does not count":
+            f"{limits.address_max_connections}:",
+        "connections from one address to one robot": f"{limits.address_max_robot_connections}",
+        "messages/s of all connections of one address together (one per started 16 KiB, 1 s "
+        "of burst)": f"{limits.address_max_rate:g}",
+        "handling time / incoming bytes of all connections of one address":
+            f"{limits.address_handling_share:g} of a core / "
+            f"{limits.address_bytes_per_s >> 20} MiB/s",
+        "new names one address enrols in an open class":
+            f"{limits.address_enrolments}, then {limits.address_enrolments_per_s:g}/s",
     }
     for limit, default in rows.items():
         assert f"| {limit} | {default}" in README, f"README limits table: {limit}"
