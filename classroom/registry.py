@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from classroom.state import SAVE_INTERVAL_S, ClassState
-from physics import TICK_PERIOD_S, ConfigError
+from physics import TICK_PERIOD_S, ConfigError, load_world
 from physics.snapshots import Pose2D
 from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
 from ros_nodes.robot_services import require_admin
@@ -123,6 +123,11 @@ def read_roster(path: str | Path) -> list[Student]:
             raise ConfigError(f"{where}: '{name}' is on the roster twice")
         seen.add(name)
         world = fields[1] if len(fields) > 1 and fields[1] else None
+        if world is not None:  # a typo is the roster's error, with its line, not the server's
+            try:
+                load_world(world)
+            except ConfigError as error:
+                raise ConfigError(f"{where}: the world of '{name}': {error}") from None
         token = fields[2] if len(fields) > 2 and fields[2] else None
         if token is not None and (why := weak_token(token)) is not None:
             raise ConfigError(f"{where}: the token of '{name}' is too weak: {why}")

@@ -117,6 +117,7 @@ def test_roster_lines_give_names_worlds_and_tokens(roster: Path) -> None:
     ("a,b,c,d\n", "roster.txt:1: expected name[,world[,token]], got 4 fields"),
     ("x" * 33 + "\n", "is not a robot name (1 to 32 of a-z, 0-9, _ and -)"),
     ("# nobody\n\n", "roster.txt: the roster names no student"),
+    ("alice\nbob,maz\n", "roster.txt:2: the world of 'bob': maz: cannot read world file"),
 ])
 def test_bad_rosters_name_the_file_and_line(tmp_path: Path, text: str, reason: str) -> None:
     path = tmp_path / "roster.txt"
@@ -132,7 +133,7 @@ def test_a_bad_world_on_the_roster_stops_the_server_with_the_reason(tmp_path: Pa
     result = subprocess.run([sys.executable, "-m", "websim.cli", "serve", "--class", str(path)],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
-    assert "no_such_world" in result.stderr
+    assert f"{path}:2: the world of 'bob': no_such_world" in result.stderr
 
 
 # ---- isolation ---------------------------------------------------------------------------
