@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.metadata
 import subprocess
 import sys
 
@@ -35,3 +36,10 @@ def test_console_script_is_installed() -> None:
     result = subprocess.run([sys.executable, "-m", "websim.cli", "--help"],
                             capture_output=True, text=True, check=False)
     assert result.returncode == 0 and "usage: websim" in result.stdout
+
+
+def test_version_says_which_websim_is_installed(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0
+    assert capsys.readouterr().out.strip() == f"websim {importlib.metadata.version('websim')}"

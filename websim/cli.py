@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib.metadata
 import sys
 from collections.abc import Sequence
 
@@ -20,10 +21,19 @@ from websim import serve as serve_command
 DEFAULT_WORLD = str(WORLDS_DIR / "empty.yaml")
 
 
+def installed_version() -> str:
+    """Websim's version, as installed (a wheel, or an editable install of a checkout)."""
+    try:
+        return importlib.metadata.version("websim")
+    except importlib.metadata.PackageNotFoundError:
+        return "(not installed: run from a checkout without pip install)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``websim`` and its subcommands."""
     parser = argparse.ArgumentParser(
         prog="websim", description="Browser-based 2D differential-drive robot simulator.")
+    parser.add_argument("--version", action="version", version=f"websim {installed_version()}")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     demo = commands.add_parser(
