@@ -16,6 +16,7 @@ import shutil
 import subprocess
 import sys
 import time
+import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -245,6 +246,11 @@ def test_roslibjs_page_drives_the_robot_in_chromium(server: ServerProcess) -> No
         page.click("#stop")
         odom_text = page.locator("#odom").text_content() or ""
         assert errors == []
+        # it names its icon (else browsers ask for /favicon.ico, which is not served: a 404)
+        icon = page.evaluate("document.querySelector('link[rel=icon]')?.href ?? null")
+        assert icon is not None and icon.startswith(server.http_url)
+        with urllib.request.urlopen(icon, timeout=10) as response:
+            assert response.status == 200
     assert "y=0.000 m yaw=0.000 rad" in odom_text
     odom = standing_odom(server)
     assert 0.3 <= odom["pose"]["pose"]["position"]["x"] < 0.5
