@@ -35,6 +35,7 @@ from classroom.registry import (
 from physics import ConfigError, Simulation, load_world
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.session import Session
+from websim.sites import INSTRUCTOR_ROW
 
 from server_process import ADMIN_TOKEN, ServerProcess, start_server, wait_for
 
@@ -221,7 +222,9 @@ def test_unknown_names_and_the_root_are_refused_with_a_reason(server: ServerProc
 def test_each_robot_token_is_admin_on_its_robot_only(server: ServerProcess,
                                                     links: Path) -> None:
     rows = {row["name"]: row for row in csv.DictReader(links.open())}
-    assert list(rows) == ["alice", "bob", "carol"]
+    assert list(rows) == ["alice", "bob", "carol", "#instructor"]  # last: the dashboard
+    assert rows["#instructor"]["page"].endswith(f":{server.http_port}/class?token={ADMIN_TOKEN}")
+    assert rows["#instructor"]["token"] == ADMIN_TOKEN
     assert rows["carol"]["token"] == CAROL_TOKEN
     alice_token = rows["alice"]["token"]
     assert rows["alice"]["admin_page"].endswith(f"/robots/alice/admin?token={alice_token}")
@@ -426,7 +429,8 @@ def test_students_cannot_ask_for_status_or_pause(server: ServerProcess) -> None:
 
 def test_robot_tokens_derive_from_the_class_secret_not_the_instructor_token(
         server: ServerProcess, links: Path) -> None:
-    rows = {row["name"]: row["token"] for row in csv.DictReader(links.open())}
+    rows = {row["name"]: row["token"] for row in csv.DictReader(links.open())
+            if row["name"] != INSTRUCTOR_ROW}
     assert rows["alice"] != derived_token(ADMIN_TOKEN, "alice")  # no offline guessing
     assert len(rows["alice"]) == 24 and len(set(rows.values())) == 3
     assert rows["carol"] == CAROL_TOKEN  # the roster's own token wins

@@ -34,7 +34,7 @@ from rosbridge.graph.names import RELAY_NODE_NAME
 from rosbridge.transport.front import start_websocket
 from websim.http_server import start_http
 from websim.lan import lan_addresses, qr_lines
-from websim.sites import Site
+from websim.sites import Site, dashboard_url
 
 WEB_DIR = shipped("websim", "web-interface")
 """The static frontend."""
@@ -268,6 +268,8 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
         print(f"  websocket: ws://{host}:{args.ws_port}/robots/NAME", flush=True)
         print(f"  admin:     http://{host}:{args.http_port}/robots/NAME/admin?token={token} "
               "(the instructor's token: every robot)", flush=True)
+        print(f"  dashboard: {dashboard_url(host, args.public_http_port or args.http_port, token)}",
+              flush=True)
     for line in site.banner:
         print(f"  {line}", flush=True)
     if ros is not None:

@@ -179,9 +179,9 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
                           else "new: saved every few seconds; --fresh starts over") + ")")
     if args.links is not None:
         write_links(Path(args.links), classroom, public_host(args.host),
-                    args.public_http_port or args.http_port, site.ws_port)
+                    args.public_http_port or args.http_port, site.ws_port, token)
         site.banner.append(f"links:     {args.links} (name, page, admin page with the robot's "
-                           "token, WebSocket, token)")
+                           "token, WebSocket, token; last, #instructor: the dashboard)")
     return site
 
 
@@ -192,14 +192,28 @@ def public_host(bind: str) -> str:
     return "localhost" if bind == "127.0.0.1" else bind
 
 
+def dashboard_url(host: str, http_port: int, admin_token: str) -> str:
+    """The class's dashboard URL with the instructor's token.
+
+    The page keeps the token for its tab and takes it out of the address bar.
+    """
+    return f"http://{_url_name(host)}:{http_port}/class?token={admin_token}"
+
+
+INSTRUCTOR_ROW = "#instructor"
+"""The links file's last row: the dashboard with the instructor's token (not a robot name:
+a ``#`` is never one)."""
+
+
 def write_links(path: Path, classroom: Classroom, host: str, http_port: int,
-                ws_port: int) -> None:
+                ws_port: int, admin_token: str | None = None) -> None:
     """The instructor's hand-out: one row per robot (name, page, admin page, WebSocket, token).
 
     The page URL carries the robot's token in its fragment (``#token=``: never sent to a
-    server; the page keeps it and takes it out of the address bar). Written atomically (a
-    temporary file renamed over it) with mode 0600; a symbolic link at ``path`` is refused,
-    never written through.
+    server; the page keeps it and takes it out of the address bar). With ``admin_token``, a
+    last row ``#instructor`` holds the dashboard's URL with it (keep that row to yourself).
+    Written atomically (a temporary file renamed over it) with mode 0600; a symbolic link at
+    ``path`` is refused, never written through.
 
     Raises:
         ConfigError: the file cannot be written, or ``path`` is a symbolic link.
@@ -213,6 +227,9 @@ def write_links(path: Path, classroom: Classroom, host: str, http_port: int,
         page = f"http://{name_in_url}:{http_port}{ROBOTS_PREFIX}{name}/"
         writer.writerow([name, f"{page}#token={token}", f"{page}admin?token={token}",
                          f"ws://{name_in_url}:{ws_port}{ROBOTS_PREFIX}{name}", token])
+    if admin_token is not None:
+        writer.writerow([INSTRUCTOR_ROW, dashboard_url(host, http_port, admin_token), "",
+                         f"ws://{name_in_url}:{ws_port}/", admin_token])
     write_private(path, text.getvalue(), "--links")
 
 
