@@ -26,14 +26,14 @@ from ros_nodes.parameters import (
     value_from_parameter_value,
 )
 from ros_nodes.robot_interface import NODE_NAME, PARAMETER_SERVICES, RESET_SERVICE
-from ros_nodes.rosapi import ADMIN_HINT, add_rosapi, require_admin
+from ros_nodes.rosapi import add_rosapi, require_admin
 from ros_nodes.rosout import RobotLog
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.errors import ServiceError
 from rosbridge.core.session import Session
 
-__all__ = ["ADMIN_HINT", "add_robot_services", "require_admin"]
+__all__ = ["add_robot_services", "require_admin"]
 
 
 def _names(args: Mapping[str, Any], field: str = "names") -> list[str]:

@@ -63,15 +63,23 @@ ROS_DISTRO = "humble"
 """What ``get_ros_version`` answers: the distribution whose definitions the bridge uses
 (``rosbridge.msgs.definitions``) and the Docker stack's default."""
 
-ADMIN_HINT = "connect with the admin token: ws://HOST:9090/?token=TOKEN"
 
 Handler = Callable[[dict[str, str], Session], "Mapping[str, Any] | ViaGraph"]
+
+
+def admin_hint(session: Session) -> str:
+    """How ``session`` gets admin rights: its own URL with the token.
+
+    ``/robots/NAME`` in a class (the robot's token or the instructor's), ``/`` for the single
+    robot: a URL that works on this server.
+    """
+    return f"connect with the admin token: ws://HOST:PORT{session.url_path}?token=TOKEN"
 
 
 def require_admin(session: Session, action: str) -> None:
     """Raise unless ``session`` presented the admin token; the one access check."""
     if not session.is_admin:
-        raise ServiceError(f"{action} needs admin rights; {ADMIN_HINT}")
+        raise ServiceError(f"{action} needs admin rights; {admin_hint(session)}")
 
 
 @dataclass

@@ -42,6 +42,7 @@ def test_set_parameters_needs_the_admin_token(rig: Rig) -> None:
     reply = set_mass(rig, rig.client(admin=False), 2.4)
     assert reply["result"] is False
     assert "set_parameters needs admin rights" in reply["values"] and "token" in reply["values"]
+    assert "ws://HOST:PORT/?token=TOKEN" in reply["values"]  # the single robot's URL
     assert rig.robot.sim.params.mass_kg == 1.2
 
 

@@ -234,6 +234,8 @@ def test_each_robot_token_is_admin_on_its_robot_only(server: ServerProcess,
     assert own["values"]["results"][0]["successful"] is True
     other = set_mass(robot_url(server, "bob", alice_token), 2.0)
     assert other["result"] is False and "needs admin rights" in other["values"]
+    # the hint names the URL that works in a class (the root refuses students)
+    assert "ws://HOST:PORT/robots/bob?token=TOKEN" in other["values"]
     for name in ("alice", "bob"):
         instructor = set_mass(robot_url(server, name, ADMIN_TOKEN), 1.2)
         assert instructor["values"]["results"][0]["successful"] is True

@@ -166,6 +166,9 @@ class Session:
         self.is_admin = is_admin
         self.may_drive = may_drive
         """Whether it may change the robot, not only watch (``access.DriveRules``)."""
+        self.url_path = "/"
+        """The path of the WebSocket URL it connected to (``/robots/alice``): a hint names the
+        URL that works on this server (set by the transport)."""
         self.limits = limits or ClientLimits()
         self.outbox = outbox if outbox is not None else \
             Outbox(self.limits.max_queued_bytes, self.limits.max_replies)
