@@ -83,6 +83,30 @@ def test_a_robots_page_drives_that_robot_only(server: ServerProcess, links: Path
         context.close()
 
 
+def test_a_robots_page_says_whose_robot_it_is_and_copies_the_url_for_the_students_code(
+        server: ServerProcess, links: Path, browser: Any) -> None:
+    rows = {row["name"]: row for row in csv.DictReader(links.open())}
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    context.grant_permissions(["clipboard-read", "clipboard-write"])
+    try:
+        page = context.new_page()
+        page.goto(rows["robot01"]["page"].replace("localhost", "127.0.0.1"))  # #token=...
+        page.wait_for_selector('#conn-status[data-status="connected"]', timeout=15000)
+        url = f"ws://127.0.0.1:{server.ws_port}/robots/robot01"
+        assert page.title() == "robot01 \u2014 websim"
+        line = page.text_content("#your-robot-text") or ""
+        assert line == f"Your robot: robot01 \u2014 your code connects to {url}?token=\u2026"
+        assert rows["robot01"]["token"] not in line  # shown elided, copied whole
+        page.click("#your-robot-copy")
+        wait_for(lambda: page.text_content("#your-robot-copy") == "Copied", 5.0, "the copy")
+        assert page.evaluate("navigator.clipboard.readText()") == \
+            f"{url}?token={rows['robot01']['token']}"
+        box = page.locator("#your-robot").bounding_box()
+        assert box is not None and box["y"] + box["height"] <= 800  # on the first screen
+    finally:
+        context.close()
+
+
 def test_a_robots_admin_page_with_its_token_sets_that_robots_mass(server: ServerProcess,
                                                                  links: Path,
                                                                  browser: Any) -> None:

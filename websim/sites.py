@@ -98,7 +98,8 @@ class Site:
             return robot_json(host.robot.sim.params, host.robot.sim.lidar.params)
         url = f"ws://{_url_name(hostname)}:{self.ws_port}{ROBOTS_PREFIX}{robot}"
         config: dict[str, object] = {"about": f"robot {robot} of this class, filled by websim "
-                                              "serve", "ws": url, "adminWs": url}
+                                              "serve", "ws": url, "adminWs": url,
+                                     "robot": robot}
         if self.classroom is not None and self.classroom.open_class:
             # the service that hands a newly enrolled robot's token to its first connection
             config["robotToken"] = {"name": TOKEN_SERVICE, "type": "websim/srv/RobotToken"}

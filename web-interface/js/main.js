@@ -9,6 +9,7 @@ import { createState } from './state.js';
 import { LivePlots } from './plots.js';
 import { PidPanel } from './pid-panel.js';
 import { Readouts } from './readouts.js';
+import { showYourRobot } from './your-robot.js';
 import {
   $, closeWithPage, createTeleop, createView, keepBridgeOnNavigation, librariesLoaded,
   robotDescription, showFatal, subscribeRobot,
@@ -26,6 +27,10 @@ async function main() {
     url: initialWsUrl(window.location, config.ws), token,
     tokenUrl: ownWsUrl(window.location, config.ws),
   });
+  // A class robot's page: whose robot, and the URL the student's own code uses.
+  const showOwner = showYourRobot({
+    box: $('#your-robot'), text: $('#your-robot-text'), copy: $('#your-robot-copy'),
+  }, config, ownWsUrl(window.location, config.ws), () => connection.token);
   if (!token && config.robotToken) {
     // An open class: the first connection to a new name is handed its robot. Ask once.
     connection.addEventListener('connected', () => {
@@ -34,6 +39,7 @@ async function main() {
         if (reply && typeof reply.token === 'string' && reply.token) {
           keepRobotToken(window.location, window.localStorage, reply.token);
           connection.token = reply.token; // sent from the next (re)connection on
+          showOwner?.();
         }
       }).catch(() => {}); // not this page's robot: it watches
     });
