@@ -10,19 +10,14 @@
 // is your robot's with its token, ws://HOST:9090/robots/NAME?token=TOKEN: without the token you
 // may watch the robot but not drive it.
 //
-// This file needs roslib 1.4.1, the course text's version: `npm install roslib` now installs
-// roslib 2.x, an ES module only, where `require('roslib')` fails and ROSLIB.Message is gone;
-// for 2.x run course_snippets.mjs instead (examples/README.md). Here roslib is the web
-// interface's copy of 1.4.1 (cd web-interface && npm ci), so the file runs from the checkout;
-// in your own script, after `npm install roslib@1.4.1` next to it, the line below is just
-// `const ROSLIB = require('roslib');`.
+// This file needs roslib 1.4.1, the course text's version: copy it into a folder of your own
+// and run `npm install roslib@1.4.1` there. (`npm install roslib` now installs roslib 2.x, an
+// ES module only, where `require('roslib')` fails and ROSLIB.Message is gone; for 2.x run
+// course_snippets.mjs instead: examples/README.md.) From this checkout, without a copy:
+// NODE_PATH=web-interface/node_modules node examples/course_snippets.js
 'use strict';
 
-const path = require('path');
-const { createRequire } = require('module');
-
-const ROSLIB = createRequire(path.join(__dirname, '..', 'web-interface', 'package.json'))(
-  'roslib');
+const ROSLIB = require('roslib');
 
 const url = process.argv[2] || 'ws://localhost:9090';
 const DRIVE_MS = 2000;

@@ -31,6 +31,8 @@ from server_process import ServerProcess, start_server
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
 ROSLIB = ROOT / "web-interface" / "node_modules" / "roslib" / "build" / "roslib.min.js"
+ROSLIB1_MODULES = ROOT / "web-interface" / "node_modules"
+"""roslib 1.4.1 and what it needs, as ``npm install roslib@1.4.1`` leaves them (the page's)."""
 PAGE_ARGS = ["--disable-features=LocalNetworkAccessChecks"]
 """The page is answered by Playwright, which Chromium counts as a public site: let it reach
 the local rosbridge as the served copy would."""
@@ -113,9 +115,11 @@ def check_drive_output(stdout: str, server: ServerProcess) -> None:
 
 @pytest.mark.skipif(NODE is None, reason="node not installed")
 @pytest.mark.skipif(not ROSLIB.exists(), reason="roslib missing: run npm ci in web-interface/")
-def test_node_course_snippets_drive_the_robot(server: ServerProcess) -> None:
+def test_node_course_snippets_drive_the_robot(server: ServerProcess, tmp_path: Path) -> None:
+    """As a student runs it: copied into a folder of theirs, roslib 1.4.1 installed beside it."""
     assert NODE is not None
-    result = subprocess.run([NODE, str(EXAMPLES / "course_snippets.js"), server.ws_url],
+    script = student_folder(tmp_path, "course_snippets.js", ROSLIB1_MODULES)
+    result = subprocess.run([NODE, script.name, server.ws_url], cwd=tmp_path,
                             capture_output=True, text=True, timeout=RUN_TIMEOUT_S, check=False)
     assert result.returncode == 0, result.stderr
     check_drive_output(result.stdout, server)
@@ -130,13 +134,14 @@ def test_roslibpy_course_snippets_drive_the_robot(server: ServerProcess) -> None
     check_drive_output(result.stdout, server)
 
 
-def test_scripts_fail_with_the_reason_when_nothing_listens() -> None:
+def test_scripts_fail_with_the_reason_when_nothing_listens(tmp_path: Path) -> None:
     from server_process import free_port
 
     url = f"ws://127.0.0.1:{free_port()}"
     commands = [[sys.executable, str(EXAMPLES / "course_snippets.py"), url]]
     if NODE is not None and ROSLIB.exists():
-        commands.append([NODE, str(EXAMPLES / "course_snippets.js"), url])
+        script = student_folder(tmp_path, "course_snippets.js", ROSLIB1_MODULES)
+        commands.append([NODE, str(script), url])
     for command in commands:
         result = subprocess.run(command, capture_output=True, text=True,
                                 timeout=RUN_TIMEOUT_S, check=False)
@@ -148,6 +153,7 @@ def student_folder(tmp_path: Path, script: str, node_modules: Path) -> Path:
     """A student's folder: ``examples/<script>`` copied in, with ``node_modules`` beside it
     (as ``npm install roslib`` leaves it; a link to ours). Node resolves ``import 'roslib'``
     from the script's folder upwards, NODE_PATH aside; returns the copied script."""
+    tmp_path.mkdir(parents=True, exist_ok=True)
     copied = tmp_path / script
     shutil.copyfile(EXAMPLES / script, copied)
     (tmp_path / "node_modules").symlink_to(node_modules, target_is_directory=True)
@@ -272,7 +278,8 @@ def test_the_snippets_drive_a_class_robot_with_its_token(tmp_path: Path) -> None
         if importlib.util.find_spec("roslibpy") is not None:
             commands.append([sys.executable, str(EXAMPLES / "course_snippets.py"), url])
         if NODE is not None and ROSLIB.exists():
-            commands.append([NODE, str(EXAMPLES / "course_snippets.js"), url])
+            script = student_folder(tmp_path / "student", "course_snippets.js", ROSLIB1_MODULES)
+            commands.append([NODE, str(script), url])
         if not commands:
             pytest.skip("neither roslibpy nor node with roslib installed")
         for command in commands:
