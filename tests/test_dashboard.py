@@ -269,6 +269,27 @@ def test_every_robot_has_a_card_and_the_card_of_a_driven_robot_says_who(
 
 
 @needs_browser
+def test_reset_all_asks_for_a_second_click_before_it_resets_every_robot(
+        server: ServerProcess, browser: Any) -> None:
+    with dashboard(browser, server) as (page, log):
+        with client(robot_ws_url(server, "robot02", TOKENS["robot02"])) as student:
+            student.drive(0.3)
+            wait_for(lambda: float(card(page, "robot02")["pose"].split(",")[0]) > 0.1,
+                     timeout_s=10.0, what="robot02 to drive off")
+            student.drive(0.0)
+        page.click("#all-reset")
+        assert page.text_content("#all-reset") == f"Reset all {CLASS_SIZE} robots? Click again"
+        page.wait_for_timeout(1000)  # the one click did nothing
+        assert float(card(page, "robot02")["pose"].split(",")[0]) > 0.1
+        page.click("#all-reset")
+        wait_for(lambda: card(page, "robot02")["pose"] == "0.00, 0.00, 0°", timeout_s=10.0,
+                 what="robot02's card to show the reset")
+        assert page.text_content("#all-notice") == f"reset {CLASS_SIZE} robots"
+        assert page.text_content("#all-reset") == "Reset all"
+        assert log.console_errors == [] and log.page_errors == []
+
+
+@needs_browser
 def test_pause_all_pauses_every_robot_and_resume_all_lets_them_run(
         server: ServerProcess, browser: Any) -> None:
     with dashboard(browser, server) as (page, log):

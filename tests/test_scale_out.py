@@ -252,6 +252,7 @@ def test_the_dashboard_behind_nginx_shows_both_workers_and_resets_on_the_second(
             }""", arg=len(NAMES), timeout=30000)
         shown = page.eval_on_selector_all(".robot-card", "cards => cards.map(c => c.dataset.robot)")
         assert set(shown) == first | second == set(NAMES)
+        assert shown == sorted(shown), "cards by name, not by worker"
         assert sorted(sockets) == [f"ws://127.0.0.1:{proxy.ws_port}/workers/{k}/?token="
                                    f"{ADMIN_TOKEN}" for k in (0, 1)]
         assert page.text_content("#conn-status") == "connected"

@@ -3,7 +3,7 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  capitalized, clientsText, pauseBadge, payloadText, robotPageUrl,
+  byName, capitalized, clientsText, pauseBadge, payloadText, robotPageUrl,
 } from '../../web-interface/js/class-grid.js';
 import { parseStatus } from '../../web-interface/js/class-state.js';
 import { robot } from './robot.mjs';
@@ -36,4 +36,9 @@ test('a robot\'s page link and button labels', () => {
   assert.equal(robotPageUrl('/robots/', 'robot05'), '/robots/robot05/');
   assert.equal(robotPageUrl('/robots/', 'a b'), '/robots/a%20b/');
   assert.equal(capitalized('dynamic'), 'Dynamic');
+});
+
+test('cards are in name order, numbers as numbers, case aside', () => {
+  const names = ['robot10', 'bob', 'robot2', 'Alice', 'robot01'];
+  assert.deepEqual(names.sort(byName), ['Alice', 'bob', 'robot01', 'robot2', 'robot10']);
 });

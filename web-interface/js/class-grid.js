@@ -22,6 +22,11 @@ export function robotPageUrl(robotsPath, name) {
   return `${robotsPath}${encodeURIComponent(name)}/`;
 }
 
+/** Robot names in the order people read them: robot2 before robot10, case aside. */
+export function byName(a, b) {
+  return a.localeCompare(b, undefined, { numeric: true, sensitivity: 'base' });
+}
+
 /** The clients line of a status: "3", or "3 (1 admin)"; the dashboard is an admin client. */
 export function clientsText(status) {
   if (!status) return '–';
@@ -109,8 +114,11 @@ export class ClassGrid {
       };
       this._cardOf.set(canvas, card);
       this._cardOf.set(element, card);
+      // By name, whichever worker's root named the robot first (behind nginx: several).
+      const next = [...this.cards.values()].find((other) => byName(state.name,
+        other.state.name) < 0);
       this.cards.set(state.name, card);
-      this.container.append(element);
+      this.container.insertBefore(element, next ? next.element : null);
       this._resizes.observe(canvas);
       this._visibility.observe(element);
     }

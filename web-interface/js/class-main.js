@@ -23,6 +23,7 @@ import {
 } from './class-commands.js';
 import { classSummary, isHeld, onStatus, onStatusError } from './class-state.js';
 import { ClassGrid } from './class-grid.js';
+import { Confirmation } from './confirm.js';
 
 /** The class's robot list is asked for again this often (ms): an open class enrols students. */
 const ROBOTS_REFRESH_MS = 10000;
@@ -139,7 +140,15 @@ async function main() {
   };
   const bindAll = (button, verb, action, call) => button.addEventListener(
     'click', () => forEveryRobot(button, verb, action, call));
-  bindAll($('#all-reset'), 'reset', 'reset', (name) => commands.reset(name));
+  // Resetting every robot throws away every student's run: it takes a second click.
+  const resetAll = $('#all-reset');
+  const confirmation = new Confirmation(resetAll, () => `Reset all ${feed.names.length} `
+    + 'robots? Click again');
+  resetAll.addEventListener('click', () => {
+    if (confirmation.confirmed()) {
+      forEveryRobot(resetAll, 'reset', 'reset', (name) => commands.reset(name));
+    }
+  });
   bindAll($('#all-pause'), 'paused', 'pause', (name) => commands.pause(name, true));
   bindAll($('#all-resume'), 'resumed', 'pause', (name) => commands.pause(name, false));
   for (const mode of modeChoices(robot)) {
