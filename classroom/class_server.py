@@ -146,6 +146,14 @@ class ClassServer(WebSocketFront):
             return None
         return InstructorView(self.classroom), self.classroom.schedule
 
+    def wrong_root_token(self, path: str, token: str | None) -> str | None:
+        """A token at the instructor's root that is not the instructor's: 403, not 404."""
+        if token and not path.startswith(ROBOTS_PREFIX):
+            return ("wrong instructor token: the instructor's view needs the instructor's "
+                    "token, websim serve's --admin-token (its banner prints the dashboard's "
+                    "link)")
+        return None
+
     def robot_admin(self, name: str | None, token: str | None) -> bool:
         """A robot's own token is admin on that robot.
 

@@ -217,6 +217,8 @@ def test_unknown_names_and_the_root_are_refused_with_a_reason(server: ServerProc
     assert status == 404 and "no robot named 'mallory' in this class" in body
     status, body = asyncio.run(refused(server.ws_url))
     assert status == 404 and "connect to ws://HOST:PORT/robots/NAME" in body
+    status, body = asyncio.run(refused(f"{server.ws_url}?token=Not-The-Instructors-1"))
+    assert status == 403 and body.startswith("wrong instructor token")  # not a 404
 
 
 def test_each_robot_token_is_admin_on_its_robot_only(server: ServerProcess,

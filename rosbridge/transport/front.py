@@ -168,6 +168,9 @@ class WebSocketFront(abc.ABC):
             return refused
         if self.root_view(path, token) is not None:
             return None
+        wrong = self.wrong_root_token(path, token)
+        if wrong is not None:
+            return self._refuse(connection, address, http.HTTPStatus.FORBIDDEN, wrong, "token")
         routed = self.find(path)
         if isinstance(routed, str):
             return self._refuse(connection, address, http.HTTPStatus.NOT_FOUND, routed,
@@ -184,6 +187,10 @@ class WebSocketFront(abc.ABC):
             status, reason = over
             return self._refuse(connection, address, http.HTTPStatus(status), reason,
                                 reason.partition(" (")[0])
+        return None
+
+    def wrong_root_token(self, path: str, token: str | None) -> str | None:
+        """Why a token presented for a root view is refused (not a missing robot), or None."""
         return None
 
     def find(self, path: str) -> tuple[Destination | None, str | None] | str:
