@@ -149,9 +149,9 @@ class ClassServer(WebSocketFront):
     def wrong_root_token(self, path: str, token: str | None) -> str | None:
         """A token at the instructor's root that is not the instructor's: 403, not 404."""
         if token and not path.startswith(ROBOTS_PREFIX):
-            return ("wrong instructor token: the instructor's view needs the instructor's "
-                    "token, websim serve's --admin-token (its banner prints the dashboard's "
-                    "link)")
+            return ("wrong instructor token: ws://HOST:PORT/ is the instructor's view of "
+                    "every robot: it needs the instructor's token (websim serve's "
+                    "--admin-token; its banner prints the dashboard's link)")
         return None
 
     def robot_admin(self, name: str | None, token: str | None) -> bool:
