@@ -154,10 +154,10 @@ def test_a_class_killed_with_sigkill_comes_back_within_the_save_interval(
     command = ["--class", str(ROBOTS), "--state", str(state), "--links", str(links),
                "--idle-pause", "3600"]
     server = start_server(command)
-    tokens = {row["name"]: row["token"] for row in csv.DictReader(links.open())
-              if row["name"] != INSTRUCTOR_ROW}  # the robots' rows, not the dashboard's
-    assert len(tokens) == ROBOTS
-    try:
+    try:  # from here on the server goes whatever fails
+        tokens = {row["name"]: row["token"] for row in csv.DictReader(links.open())
+                  if row["name"] != INSTRUCTOR_ROW}  # the robots' rows, not the dashboard's
+        assert len(tokens) == ROBOTS
         asyncio.run(drive_all(server.ws_port, tokens, 4.0))
         time.sleep(SAVE_INTERVAL_S + 0.5)  # stopped robots: a save has seen them still
         before = asyncio.run(poses(server.ws_port, list(tokens)))
