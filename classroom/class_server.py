@@ -15,11 +15,12 @@ keeps the token.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 from collections.abc import Callable
 from typing import Any
 
 from classroom.instructor_view import InstructorView
-from classroom.registry import Classroom
+from classroom.registry import ROBOT_NAME, Classroom
 from ros_nodes.robot_interface import ROBOTS_PREFIX
 from rosbridge.core.limits import ClientLimits, OriginPolicy
 from rosbridge.transport.connection import Hub
@@ -80,7 +81,7 @@ class ClassServer(WebSocketFront):
         _, name = found
         host = self.classroom.get(name or "")
         if host is None:
-            return self._unknown(name or "")
+            return self.why_unknown(name or "")
         return host, name
 
     def find(self, path: str) -> tuple[Destination | None, str | None] | str:
@@ -96,13 +97,13 @@ class ClassServer(WebSocketFront):
         if host is not None:
             return host, name
         if not self.classroom.knows(name):
-            return self._unknown(name)
+            return self.why_unknown(name)
         if self.owns is not None and not self.owns(name):
             return (f"robot '{name[:40]}' is not this worker's: the proxy routes it to "
                     "another (ws://HOST:PORT/robots/NAME)")
         if name not in self.classroom.students and \
                 len(self.classroom) >= self.classroom.max_robots:
-            return self._unknown(name)
+            return self.why_unknown(name)
         return None, name
 
     def _hosted(self, name: str) -> Destination | None:
@@ -111,10 +112,23 @@ class ClassServer(WebSocketFront):
                 return host
         return None
 
-    def _unknown(self, name: str) -> str:
+    def why_unknown(self, name: str) -> str:
+        """Why there is no robot ``name``: an invalid name, a full class, or an unknown one.
+
+        An unknown or invalid name gets the closest names, case aside first (``Alice``:
+        ``alice``).
+        """
+        if not ROBOT_NAME.fullmatch(name):
+            return (f"'{name[:40]}' is not a robot name (1 to 32 of a-z, 0-9, _ and -)"
+                    + self._did_you_mean(name))
         if self.classroom.open_class and len(self.classroom) >= self.classroom.max_robots:
             return f"the class is full ({self.classroom.max_robots} robots)"
-        return f"no robot named '{name[:40]}' in this class"
+        return f"no robot named '{name[:40]}' in this class" + self._did_you_mean(name)
+
+    def _did_you_mean(self, name: str) -> str:
+        names = list(self.classroom.students) + [hosted for hosted, _ in self.classroom]
+        close = closest_names(name, names)
+        return f"; did you mean {' or '.join(close)}?" if close else ""
 
     def admit(self, name: str | None, address: str) -> tuple[int, str] | None:
         """A new name in an open class spends one of its address's enrolments.
@@ -196,3 +210,14 @@ class ClassServer(WebSocketFront):
         if not full:
             del report["robots"], report["degraded_robots"]
         return report
+
+
+def closest_names(name: str, names: list[str], most: int = 3) -> list[str]:
+    """The robot names ``name`` was likely meant to be, at most ``most``.
+
+    The same name but for case first, then the closest by spelling (``difflib``).
+    """
+    lowered = name.lower()
+    same_case_aside = [known for known in names if known == lowered]
+    near = difflib.get_close_matches(lowered, names, n=most, cutoff=0.6)
+    return list(dict.fromkeys(same_case_aside + near))[:most]

@@ -265,6 +265,10 @@ def test_each_robot_has_its_page_and_the_page_learns_its_bridge(server: ServerPr
     assert robot["topics"]["cmd_vel"]["name"] == "/cmd_vel"
     status, body = get(f"{server.http_url}/robots/nobody/")
     assert status == 404 and "no robot named 'nobody'" in body
+    status, body = get(f"{server.http_url}/robots/Bob/")  # wrongly cased: the right one named
+    assert status == 404 and "did you mean bob?" in body
+    status, body = get(f"{server.http_url}/robots/carl/")  # a near miss
+    assert status == 404 and "did you mean carol?" in body
     with urllib.request.urlopen(f"{server.http_url}/robots/bob", timeout=5) as response:
         assert response.url.endswith("/robots/bob/")  # redirected: relative URLs need the /
 
@@ -541,3 +545,22 @@ def test_an_open_class_hands_a_new_name_to_its_first_connection_only(tmp_path: P
         assert config["robotToken"]["name"] == "/websim/token"
     finally:
         server.stop()
+
+
+def test_an_invalid_or_mistyped_name_is_refused_for_what_it_is(tmp_path: Path) -> None:
+    def make_robot(student: Student) -> VirtualRobot:
+        return VirtualRobot(Simulation(load_world("empty")))
+
+    from classroom.class_server import ClassServer
+
+    roster = Classroom([Student("alice"), Student("carol")], make_robot, open_class=True,
+                       idle_pause_s=None, lazy=True)
+    front = ClassServer(roster, ADMIN_TOKEN)
+    assert front.find("/robots/Bad.Name") == \
+        "'Bad.Name' is not a robot name (1 to 32 of a-z, 0-9, _ and -)"
+    assert front.find("/robots/Alice") == \
+        "'Alice' is not a robot name (1 to 32 of a-z, 0-9, _ and -); did you mean alice?"
+    closed = ClassServer(Classroom([Student("carol")], make_robot, idle_pause_s=None,
+                                   lazy=True), ADMIN_TOKEN)
+    assert closed.find("/robots/carl") == "no robot named 'carl' in this class; " \
+                                          "did you mean carol?"

@@ -27,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import gzip
+import html
 import json
 import logging
 import os
@@ -373,7 +374,7 @@ class HttpServer:
         if path.startswith(ROBOTS_PREFIX):  # a class's robot: its page, with its documents
             robot, slash, rest = path[len(ROBOTS_PREFIX):].partition("/")
             if not self._live.has_robot(robot):
-                return web.Response(status=404, text=f"404: no robot named '{robot[:40]}' here")
+                return not_a_robot_page(self._live.why_no_robot(robot))
             if not slash:  # the page's relative URLs need the trailing slash
                 return web.Response(status=308, headers={"Location": f"{ROBOTS_PREFIX}{robot}/"})
             path = f"/{rest}"
@@ -424,6 +425,27 @@ class HttpServer:
         return asset
 
 
+def not_a_robot_page(why: tuple[str, list[str]]) -> web.Response:
+    """404 for a robot page that does not exist, styled as the pages are.
+
+    It names the robots the address may have meant, each a link to its page.
+    """
+    reason, names = why
+    links = "".join(f'<li><a href="{ROBOTS_PREFIX}{html.escape(name)}/">{html.escape(name)}'
+                    "</a></li>" for name in names)
+    body = ('<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
+            '<meta name="viewport" content="width=device-width, initial-scale=1">'
+            '<meta name="referrer" content="no-referrer"><title>No such robot - websim</title>'
+            '<link rel="icon" href="/favicon.svg" type="image/svg+xml">'
+            '<link rel="stylesheet" href="/css/style.css"></head>'
+            '<body><main class="layout"><section class="card not-found">'
+            f'<h1>No such robot</h1><p id="reason">{html.escape(reason, quote=False)}</p>'
+            + (f'<p>Did you mean:</p><ul id="suggestions">{links}</ul>' if names else "")
+            + '<p>Your instructor\'s links name your robot\'s page.</p></section></main>'
+            "</body></html>")
+    return web.Response(status=404, text=body, content_type="text/html")
+
+
 def _etags(header: str) -> list[str]:
     """The entity tags of an If-None-Match header, weak ones compared as strong."""
     return [tag.strip().removeprefix("W/") for tag in header.split(",")]
@@ -434,6 +456,9 @@ class LiveDocuments(Protocol):
 
     def has_robot(self, name: str) -> bool:
         """Whether ``/robots/NAME/`` is a robot's page (False on a single-robot server)."""
+
+    def why_no_robot(self, name: str) -> tuple[str, list[str]]:
+        """Why ``/robots/NAME/`` is no robot's page, and the names it may have meant."""
 
     def document(self, robot: str | None, name: str, hostname: str) -> str | None:
         """The text of ``name`` (``robot.json``, ``config.json``) for ``robot``.

@@ -17,7 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from classroom.class_server import ClassServer
+from classroom.class_server import ClassServer, closest_names
 from classroom.registry import (
     Classroom,
     Student,
@@ -70,6 +70,15 @@ class Site:
     def has_robot(self, name: str) -> bool:
         """Whether ``/robots/NAME/`` is a robot's page (pages create no robot)."""
         return self.classroom is not None and self.classroom.knows(name)
+
+    def why_no_robot(self, name: str) -> tuple[str, list[str]]:
+        """Why ``/robots/NAME/`` is no robot's page, and the names it may have meant."""
+        if self.classroom is None:
+            return "this server runs one robot, not a class: its page is /", []
+        known = list(self.classroom.students) + [hosted for hosted, _ in self.classroom]
+        reason = self.front.why_unknown(name) if isinstance(self.front, ClassServer) else \
+            f"no robot named '{name[:40]}' here"
+        return reason, closest_names(name, known)
 
     def document(self, robot: str | None, name: str, hostname: str) -> str | None:
         """The live ``robot.json`` of a robot, and a class robot's ``config.json``.
