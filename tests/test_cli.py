@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.metadata
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -43,3 +44,13 @@ def test_version_says_which_websim_is_installed(capsys: pytest.CaptureFixture[st
         main(["--version"])
     assert done.value.code == 0
     assert capsys.readouterr().out.strip() == f"websim {importlib.metadata.version('websim')}"
+
+
+def test_links_behind_a_proxy_need_both_public_ports(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    links = tmp_path / "links.csv"
+    code = main(["serve", "--class", "2", "--worker", "--public-ws-port", "9090",
+                 "--links", str(links), "--state", str(tmp_path / "s.sqlite")])
+    assert code == 2
+    assert "needs both --public-http-port and --public-ws-port" in capsys.readouterr().err
+    assert not links.exists()

@@ -127,6 +127,11 @@ def _run_serve(args: argparse.Namespace) -> int:
     if weakness is not None:
         raise ConfigError(f"--admin-token is too weak: {weakness} (leave it out for a random "
                           "one, printed at start)")
+    if getattr(args, "links", None) and (args.public_ws_port is None) != \
+            (args.public_http_port is None):
+        raise ConfigError("--links behind a proxy needs both --public-http-port and "
+                          "--public-ws-port (the proxy's ports): with one, the links would mix "
+                          "this process's port with the proxy's")
     limits, origins = serve_command.limits_from(args), serve_command.origins_from(args)
     clock = WallClock()  # the one clock of the server: every robot's, the class's
     if args.class_spec is None:

@@ -257,19 +257,24 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
         tasks.append(asyncio.create_task(_poll_graph(ros)))
 
     host = _url_host(args.host)
+    # what students and the instructor type: behind a proxy, its ports (--public-*-port)
+    http_port = args.public_http_port or args.http_port
+    ws_port = args.public_ws_port or args.ws_port
     if robot is not None:
         print(f"websim: world '{robot.sim.world.name}', {robot.sim.mode} mode", flush=True)
-        print(f"  page:      http://{host}:{args.http_port}/", flush=True)
-        print(f"  websocket: ws://{host}:{args.ws_port}/", flush=True)
-        print(f"  admin:     http://{host}:{args.http_port}/admin?token={token}", flush=True)
+        print(f"  page:      http://{host}:{http_port}/", flush=True)
+        print(f"  websocket: ws://{host}:{ws_port}/", flush=True)
+        print(f"  admin:     http://{host}:{http_port}/admin?token={token}", flush=True)
     else:
         print(f"websim: a class, {args.mode} mode", flush=True)
-        print(f"  pages:     http://{host}:{args.http_port}/robots/NAME/", flush=True)
-        print(f"  websocket: ws://{host}:{args.ws_port}/robots/NAME", flush=True)
-        print(f"  admin:     http://{host}:{args.http_port}/robots/NAME/admin?token={token} "
+        print(f"  pages:     http://{host}:{http_port}/robots/NAME/", flush=True)
+        print(f"  websocket: ws://{host}:{ws_port}/robots/NAME", flush=True)
+        print(f"  admin:     http://{host}:{http_port}/robots/NAME/admin?token={token} "
               "(the instructor's token: every robot)", flush=True)
-        print(f"  dashboard: {dashboard_url(host, args.public_http_port or args.http_port, token)}",
-              flush=True)
+        print(f"  dashboard: {dashboard_url(host, http_port, token)}", flush=True)
+        if args.public_http_port or args.public_ws_port:
+            print(f"  (this process listens on {args.http_port} and {args.ws_port}; the "
+                  "addresses above are the proxy's)", flush=True)
     for line in site.banner:
         print(f"  {line}", flush=True)
     if ros is not None:
