@@ -4,9 +4,9 @@
 (``ws://HOST:PORT/?token=...``, every robot under ``/NAME/``). What the robots did is driven
 and checked from outside the page: raw WebSocket clients drive a robot as a student would,
 and ``/healthz`` says which robots are paused. The page's modules are unit-tested under Node
-(``tests/web/class-*.test.mjs``, run by test_web_interface.py with the others).
+(``tests/web/class-*.test.mjs``, run by test_page_modules.py with the others).
 
-As in test_web_interface.py, the servers listen on free ports, so the browser is answered a
+As in the test_page_*.py files, the servers listen on free ports, so the browser is answered a
 ``config.json`` naming the test server's bridge, as an instructor's would: the token goes only
 to the page's own server. Screenshots go to ``test-artifacts/`` (gitignored).
 """

@@ -14,6 +14,7 @@ import re
 from pathlib import Path
 
 import pytest
+import tomllib
 import yaml
 from deployment import (
     ADMIN_BRIDGE,
@@ -84,6 +85,17 @@ def test_every_copy_source_exists_in_the_build_context(service: str) -> None:
             assert list(context.glob(source.rstrip("/"))), f"{path}: COPY {source}: no such file"
             checked.append(source)
     assert checked, f"{path}: no COPY from the build context found: nothing was checked"
+
+
+def test_the_bridge_image_carries_every_python_package_of_the_project() -> None:
+    """``pip install -e .`` in the image needs every package pyproject.toml names (a folder
+    the image lacks installs and then fails to import)."""
+    project = tomllib.loads((PROJECT_DIR / "pyproject.toml").read_text(encoding="utf-8"))
+    packages = [pattern.rstrip("*") for pattern in
+                project["tool"]["setuptools"]["packages"]["find"]["include"]]
+    copied = {args.split()[0].rstrip("/") for keyword, args in
+              dockerfile(PROJECT_DIR / "ros2-bridge" / "Dockerfile") if keyword == "COPY"}
+    assert packages and set(packages) <= copied, sorted(set(packages) - copied)
 
 
 def published_sources() -> list[str]:

@@ -1,5 +1,5 @@
 // The heading PID (web-interface/js/pid.js): hand-worked steps and closed-loop behaviour.
-// Run by tests/test_web_interface.py as `node --test`.
+// Run by tests/test_page_modules.py as `node --test`.
 import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
