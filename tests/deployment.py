@@ -12,12 +12,17 @@ import importlib.util
 import os
 import re
 import shutil
+import subprocess
+import urllib.request
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from types import ModuleType
 from typing import Any
 
 import yaml
 
+from classroom.nginx_config import Worker, foreground_command, in_directory, nginx_config
 from physics.params import PROJECT_DIR
 
 COMPOSE_FILE = PROJECT_DIR / "docker-compose.yml"
@@ -149,3 +154,35 @@ def load_healthcheck() -> ModuleType:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+@contextmanager
+def running_nginx(directory: Path, workers: list[Worker], http_port: int,
+                  ws_port: int) -> Iterator[None]:
+    """The real nginx, configured by ``websim nginx-config`` for ``workers``, in front of
+    them on ``http_port`` and ``ws_port`` of 127.0.0.1, until the block ends; it answers
+    ``/healthz`` when the block starts."""
+    from server_process import wait_for
+
+    assert NGINX is not None
+    conf = nginx_config(workers, f"127.0.0.1:{http_port}", f"127.0.0.1:{ws_port}")
+    path = directory / "nginx.conf"
+    path.write_text(in_directory(conf, directory))
+    process = subprocess.Popen(foreground_command(str(NGINX), path, directory),
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    def answers() -> bool:
+        if process.poll() is not None:
+            raise AssertionError((directory / "error.log").read_text())
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{http_port}/healthz", timeout=2):
+                return True
+        except OSError:
+            return False
+
+    try:
+        wait_for(answers, 10.0, "nginx to answer")
+        yield
+    finally:
+        process.terminate()
+        process.wait(timeout=10)

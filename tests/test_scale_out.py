@@ -15,8 +15,6 @@ from __future__ import annotations
 import contextlib
 import itertools
 import json
-import shutil
-import subprocess
 import urllib.request
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -24,17 +22,16 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from deployment import NGINX, running_nginx
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import ClientConnection
 from websockets.sync.client import connect as connect_sync
 
-from classroom.nginx_config import Worker, foreground_command, in_directory, nginx_config
+from classroom.nginx_config import Worker
 
 from chromium import skip_reason
 from server_process import ADMIN_TOKEN, ServerProcess, free_port, start_server, wait_for
 
-NGINX = shutil.which("nginx") or ("/usr/sbin/nginx" if Path("/usr/sbin/nginx").exists()
-                                  else None)
 pytestmark = pytest.mark.skipif(NGINX is None, reason="nginx not installed")
 
 NAMES = [f"student{index:02d}" for index in range(1, 21)]
@@ -69,28 +66,11 @@ def proxy(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Proxy]:
     http_port, ws_port = free_port(), free_port()
     workers = [start_server(["--class", str(roster), "--worker", "--public-ws-port",
                              str(ws_port)]) for _ in range(2)]
-    conf = nginx_config([Worker("127.0.0.1", w.http_port, w.ws_port) for w in workers],
-                        f"127.0.0.1:{http_port}", f"127.0.0.1:{ws_port}")
-    path = directory / "nginx.conf"
-    path.write_text(in_directory(conf, directory))
-    process = subprocess.Popen(foreground_command(str(NGINX), path, directory),
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-
-    def answers() -> bool:
-        if process.poll() is not None:
-            raise AssertionError((directory / "error.log").read_text())
-        try:
-            with urllib.request.urlopen(f"http://127.0.0.1:{http_port}/healthz", timeout=2):
-                return True
-        except OSError:
-            return False
-
     try:
-        wait_for(answers, 10.0, "nginx to answer")
-        yield Proxy(http_port, ws_port, workers)
+        with running_nginx(directory, [Worker("127.0.0.1", w.http_port, w.ws_port)
+                                       for w in workers], http_port, ws_port):
+            yield Proxy(http_port, ws_port, workers)
     finally:
-        process.terminate()
-        process.wait(timeout=10)
         for worker in workers:
             worker.stop()
 

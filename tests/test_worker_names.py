@@ -10,30 +10,22 @@ the other worker directly is refused there (404) and made nowhere, and
 from __future__ import annotations
 
 import json
-import shutil
-import subprocess
-import urllib.request
 from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 
 import pytest
+from deployment import NGINX, running_nginx
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 from classroom.nginx_config import (
     Worker,
-    foreground_command,
-    in_directory,
-    nginx_config,
     worker_for,
     worker_ring,
 )
 
-from server_process import ServerProcess, free_port, start_server, wait_for
+from server_process import ServerProcess, free_port, start_server
 
-NGINX = shutil.which("nginx") or ("/usr/sbin/nginx" if Path("/usr/sbin/nginx").exists()
-                                  else None)
 pytestmark = pytest.mark.skipif(NGINX is None, reason="nginx not installed")
 
 NAMES = [f"student{index:02d}" for index in range(1, 17)]
@@ -59,27 +51,10 @@ def proxy(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Proxy]:
                              "--public-ws-port", str(ws_port)],
                             ws_port=spec.ws_port, http_port=spec.http_port)
                for k, spec in enumerate(specs)]
-    conf = nginx_config(specs, f"127.0.0.1:{http_port}", f"127.0.0.1:{ws_port}")
-    path = directory / "nginx.conf"
-    path.write_text(in_directory(conf, directory))
-    process = subprocess.Popen(foreground_command(str(NGINX), path, directory),
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-
-    def answers() -> bool:
-        if process.poll() is not None:
-            raise AssertionError((directory / "error.log").read_text())
-        try:
-            with urllib.request.urlopen(f"http://127.0.0.1:{http_port}/healthz", timeout=2):
-                return True
-        except OSError:
-            return False
-
     try:
-        wait_for(answers, 10.0, "nginx to answer")
-        yield Proxy(ws_port, workers, specs)
+        with running_nginx(directory, specs, http_port, ws_port):
+            yield Proxy(ws_port, workers, specs)
     finally:
-        process.terminate()
-        process.wait(timeout=10)
         for worker in workers:
             worker.stop()
 
