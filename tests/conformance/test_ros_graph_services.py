@@ -86,10 +86,15 @@ def test_rosapi_lists_the_graphs_nodes_with_their_topics_and_services(
         if node_name not in ros_client.get_nodes():
             return None
         found = ros_client.get_node_details(node_name)
-        return found if "/from_the_graph" in found["publishing"] else None
+        # Discovery announces a node's publishers and services separately:
+        # wait for both, then check what else the entry holds.
+        seen = "/from_the_graph" in found["publishing"] and \
+            "/graph_node_service" in found["services"]
+        return found if seen else None
 
-    found = graph.spin_until(details, CALL_TIMEOUT_S, f"{node_name} in rosapi's nodes")
-    assert "/graph_node_service" in found["services"]
+    found = graph.spin_until(details, CALL_TIMEOUT_S,
+                             f"{node_name} in rosapi's nodes with its topic and service")
+    assert f"{node_name}/get_parameters" in found["services"], "its own parameter services too"
     assert "/virtual_robot" in ros_client.get_nodes(), "the robot's own entry stays"
 
 
