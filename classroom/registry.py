@@ -33,6 +33,7 @@ from ros_nodes.robot_services import require_admin
 from ros_nodes.sensors import Sensor
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.clock import Clock, WallClock
+from rosbridge.core.limits import ClientLimits, LatchedBytes
 from rosbridge.core.session import Session
 from rosbridge.transport.schedule import Schedule
 
@@ -201,6 +202,8 @@ class Classroom:
         state: the class's state file: its secret, enrolments and robots' state, restored
             now and saved every ``SAVE_INTERVAL_S`` while ``run_ticks`` runs. None: a random
             secret, nothing kept.
+        latched: the server's pool of clients' latched messages, each robot's within it
+            (default: one of the default sizes).
     """
 
     def __init__(self, roster: list[Student], make_robot: Callable[[Student], VirtualRobot],
@@ -208,7 +211,8 @@ class Classroom:
                  max_robots: int = DEFAULT_MAX_ROBOTS,
                  idle_pause_s: float | None = DEFAULT_IDLE_PAUSE_S,
                  make_token: Callable[[str], str] | None = None, lazy: bool = False,
-                 clock: Clock | None = None, state: ClassState | None = None) -> None:
+                 clock: Clock | None = None, state: ClassState | None = None,
+                 latched: LatchedBytes | None = None) -> None:
         self.schedule = schedule or Schedule(TICK_PERIOD_S)
         self.clock: Clock = WallClock() if clock is None else clock
         """The class's one clock (its robots' too)."""
@@ -218,6 +222,7 @@ class Classroom:
         self.secret = state.secret if state is not None else secrets.token_urlsafe(32)
         """The random secret robot tokens derive from (kept in the state file)."""
         self._make_robot = make_robot
+        self._latched = latched or LatchedBytes.for_server(ClientLimits())
         self._idle_pause_s = idle_pause_s
         self._make_token = make_token or (lambda name: derived_token(self.secret, name))
         self._hosts: dict[str, RobotHost] = {}
@@ -245,7 +250,8 @@ class Classroom:
                     self._enrol(self.students[name])
 
     def _enrol(self, student: Student) -> RobotHost:
-        host = RobotHost(self._make_robot(student), self.schedule, self._idle_pause_s)
+        host = RobotHost(self._make_robot(student), self.schedule, self._idle_pause_s,
+                         self._latched.for_robot())
         self._hosts[student.name] = host
         self.students[student.name] = student
         self.token(student.name)

@@ -33,6 +33,7 @@ from rosbridge.core.access import DriveRules
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.errors import ServiceError
 from rosbridge.core.faults import Faults
+from rosbridge.core.limits import LatchedBytes
 from rosbridge.core.session import Session
 from rosbridge.transport.schedule import Schedule
 
@@ -105,19 +106,22 @@ class RobotHost:
         schedule: the tick schedule it follows (default: one of its own).
         idle_pause_s: stop ticking (keeping the state) once nobody has been connected for
             this long; the next connection resumes it. None: never pause.
+        latched: the pool its clients' latched messages are counted in (its own, within its
+            server's: ``LatchedBytes.for_robot``; default: one of the default size).
 
     The robot's clock (``robot.clock``) is the host's: its monotonic time measures the idle
     time, the bridge's throttles and timeouts and the last command's age.
     """
 
     def __init__(self, robot: VirtualRobot, schedule: Schedule | None = None,
-                 idle_pause_s: float | None = None) -> None:
+                 idle_pause_s: float | None = None,
+                 latched: LatchedBytes | None = None) -> None:
         self.robot = robot
         self.faults = Faults()
         clock = robot.clock
         self.bridge = Bridge(clock=clock, faults=self.faults, refusals=(ConfigError,),
                              reserved_namespaces=RESERVED_NAMESPACES,
-                             drive_rules=DRIVE_RULES)
+                             drive_rules=DRIVE_RULES, latched=latched)
         self.endpoint = RobotEndpoint(self.bridge, robot)
         self.stats = TickStats()
         self.schedule = schedule or Schedule(TICK_PERIOD_S)

@@ -8,7 +8,7 @@ from ros_nodes.robot_host import RobotHost, TickStats
 from ros_nodes.robot_interface import ROBOTS_PREFIX
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge
-from rosbridge.core.limits import ClientLimits, OriginPolicy
+from rosbridge.core.limits import ClientLimits, LatchedBytes, OriginPolicy
 from rosbridge.transport.front import Destination, WebSocketFront
 
 
@@ -26,7 +26,7 @@ class SimServer(WebSocketFront):
                  limits: ClientLimits | None = None,
                  origins: OriginPolicy | None = None) -> None:
         super().__init__(admin_token, limits, origins, robot.clock)
-        self.host = RobotHost(robot)
+        self.host = RobotHost(robot, latched=LatchedBytes.for_server(self.limits).for_robot())
 
     @property
     def robot(self) -> VirtualRobot:

@@ -14,6 +14,7 @@ from robot_rig import RobotRig, robot_rig
 
 from physics import LidarParams
 from ros_nodes.robot_endpoint import RobotEndpoint
+from rosbridge.core.limits import LatchedBytes
 
 START_S = 100.0
 """The clock's monotonic time when a rig starts (s)."""
@@ -43,8 +44,10 @@ class Clock:
 class Rig(RobotRig):
     """A hosted robot on a ``Clock`` that ticks without moving it."""
 
-    def __init__(self, lidar: LidarParams | None = None) -> None:
-        rig = robot_rig("empty", lidar=lidar, clock=Clock())  # type: ignore[arg-type]
+    def __init__(self, lidar: LidarParams | None = None,
+                 latched: LatchedBytes | None = None) -> None:
+        rig = robot_rig("empty", lidar=lidar, clock=Clock(),  # type: ignore[arg-type]
+                        latched=latched)
         super().__init__(rig.host, rig.clock)
 
     @property

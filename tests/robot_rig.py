@@ -18,6 +18,7 @@ from ros_nodes.robot_host import RobotHost
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.clock import ManualClock
+from rosbridge.core.limits import LatchedBytes
 from rosbridge.core.outbox import Outbox
 from rosbridge.core.session import Session
 
@@ -84,7 +85,8 @@ class RobotRig:
 def robot_rig(world: str = "empty", *, seed: int = 0, mode: str = "kinematic",
               lidar: LidarParams | None = None, noise: NoiseParams | None = None,
               clock: ManualClock | None = None,
-              idle_pause_s: float | None = None) -> RobotRig:
+              idle_pause_s: float | None = None,
+              latched: LatchedBytes | None = None) -> RobotRig:
     """A robot in ``world`` (a shipped name or a file), hosted, on a manual clock.
 
     Args:
@@ -96,7 +98,9 @@ def robot_rig(world: str = "empty", *, seed: int = 0, mode: str = "kinematic",
         clock: the clock (default: a ``ManualClock`` at 0 s).
         idle_pause_s: the host pauses the robot after this long without clients (s); None:
             never.
+        latched: the robot's pool of clients' latched messages (default: its own).
     """
     clock = ManualClock() if clock is None else clock
     sim = Simulation(load_world(world), seed=seed, mode=mode, lidar=lidar, noise=noise)
-    return RobotRig(RobotHost(VirtualRobot(sim, clock), idle_pause_s=idle_pause_s), clock)
+    return RobotRig(RobotHost(VirtualRobot(sim, clock), idle_pause_s=idle_pause_s,
+                              latched=latched), clock)

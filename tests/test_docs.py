@@ -64,7 +64,11 @@ def test_readme_limits_table_states_the_defaults_in_force() -> None:
         "bytes/s a client relays to others: publications, service calls and responses, "
         "goals, feedback, results": f"{limits.relay_bytes_per_s >> 10} KiB/s",
         "clients' latched messages per robot (a client's latched message goes when its "
-        "publisher unadvertises or leaves)": f"{topics.MAX_LATCHED_BYTES_PER_ROBOT >> 20} MiB",
+        "publisher unadvertises or leaves)": f"{limits.robot_latched_bytes >> 20} MiB",
+        "clients' latched messages of all the robots of a server together":
+            f"{limits.server_latched_bytes >> 20} MiB",
+        "handling time of all the clients of one robot together, from every address (a "
+        "crowd on one robot)": f"{limits.robot_handling_share:g} of a core",
         "calls waiting for client-provided services":
             f"{services.MAX_PENDING_CALLS_PER_CLIENT} per caller, "
             f"{services.MAX_PENDING_CALLS_PER_SERVICE} per service",

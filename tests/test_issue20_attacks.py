@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 import websockets
 
-from rosbridge.core.capabilities.topics import MAX_LATCHED_BYTES_PER_ROBOT
+from rosbridge.core.limits import ClientLimits
 
 from server_process import ServerProcess, start_server
 from ws_clients import OdomListener
@@ -175,7 +175,7 @@ def test_latched_messages_of_short_connections_go_with_them_and_are_bounded(
     assert after_short - before < 40
     assert any("this robot's latched messages hold" in r for r in reasons), reasons
     assert len([r for r in reasons if "latched messages hold" in r]) >= \
-        24 - MAX_LATCHED_BYTES_PER_ROBOT // size
+        24 - ClientLimits().robot_latched_bytes // size
     assert server.health()["status"] == "ok"
 
 

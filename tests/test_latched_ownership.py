@@ -3,16 +3,19 @@
 A client's latched message goes when that client leaves or unadvertises the topic (as
 rosbridge drops it with the publisher), whether it advertised or only published with
 ``latch: true``; the robot's own latched topics stay. What clients latch on one robot is
-bounded in bytes (``MAX_LATCHED_BYTES_PER_ROBOT``), with a refusal that says so.
+bounded in bytes (``ClientLimits.robot_latched_bytes``), and what clients latch on all the
+robots of a server too (``server_latched_bytes``), each with a refusal that says so.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 from bridge_rig import Rig, topics_of
 
-from rosbridge.core.capabilities.topics import MAX_LATCHED_BYTES_PER_ROBOT
-from rosbridge.core.limits import ClientLimits
+from rosbridge.core.limits import ClientLimits, LatchedBytes
+from rosbridge.core.session import Session
 
 
 @pytest.fixture
@@ -34,7 +37,7 @@ def test_a_latched_publish_without_advertise_goes_with_its_publisher(rig: Rig) -
     assert late_subscriber_gets(rig, "/note") == ["/note"]
     rig.bridge.disconnect(talker)
     assert late_subscriber_gets(rig, "/note") == []
-    assert rig.bridge.topics.latched_bytes == 0
+    assert rig.bridge.latched.held_bytes == 0
 
 
 def test_unadvertising_drops_the_publishers_latched_message(rig: Rig) -> None:
@@ -80,7 +83,7 @@ def test_latched_bytes_per_robot_are_bounded_with_a_clear_refusal(rig: Rig) -> N
                           "msg": {"data": "x" * size}, "latch": True})
         if not rig.drain(talker):
             accepted += 1
-    assert rig.bridge.topics.latched_bytes <= MAX_LATCHED_BYTES_PER_ROBOT
+    assert rig.bridge.latched.held_bytes <= ClientLimits().robot_latched_bytes
     assert 14 <= accepted < 24
     talker.relay_budget.charge(-size)
     rig.send(talker, {"op": "publish", "topic": "/big0", "msg": {"data": "y" * size},
@@ -94,4 +97,32 @@ def test_latched_bytes_per_robot_are_bounded_with_a_clear_refusal(rig: Rig) -> N
     statuses = rig.drain(other)
     assert statuses and "this robot's latched messages hold" in statuses[0]["msg"]
     rig.bridge.disconnect(talker)
-    assert rig.bridge.topics.latched_bytes == 0
+    assert rig.bridge.latched.held_bytes == 0
+
+
+def latch(rig: Rig, talker: Session, topic: str, size: int) -> list[dict[str, Any]]:
+    """``talker`` publishes a latched String of ``size`` characters; the statuses it got."""
+    talker.relay_budget.charge(-size)  # this test is about latching, not the relay rate
+    rig.send(talker, {"op": "advertise", "topic": topic, "type": "std_msgs/String"})
+    rig.send(talker, {"op": "publish", "topic": topic, "msg": {"data": "x" * size},
+                      "latch": True})
+    return rig.drain(talker)
+
+
+def test_latched_bytes_of_all_the_robots_of_a_server_are_bounded_together() -> None:
+    size = 10_000
+    server = LatchedBytes(3 * size + 2_000, robot_limit_bytes=2 * size + 1_000)
+    one, two = Rig(latched=server.for_robot()), Rig(latched=server.for_robot())
+    first, second = one.client(), two.client()
+    for rig, talker in ((one, first), (two, second)):
+        rig.send(talker, {"op": "set_level", "level": "error"})
+    assert latch(one, first, "/a", size) == latch(one, first, "/b", size) == []
+    assert latch(two, second, "/c", size) == []
+    refused = latch(two, second, "/d", size)
+    assert refused and "this server's latched messages hold" in str(refused[0]["msg"])
+    assert server.held_bytes == one.bridge.latched.held_bytes + two.bridge.latched.held_bytes
+    one.bridge.disconnect(first)  # its latched messages go, and free the server's pool
+    assert one.bridge.latched.held_bytes == 0
+    assert latch(two, second, "/d", size) == []
+    refused = latch(two, second, "/e", size)
+    assert refused and "this robot's latched messages hold" in str(refused[0]["msg"])

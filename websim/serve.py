@@ -89,6 +89,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "together; beyond it their frames wait (default "
                              f"{defaults.address_max_rate:g}; raise it with "
                              "--max-connections-per-address)")
+    parser.add_argument("--handling-share-per-robot", type=_positive(float),
+                        default=defaults.robot_handling_share, metavar="FRACTION",
+                        help="fraction of a core the server spends on the input of all the "
+                             "clients of one robot together, from every address; beyond it "
+                             "their frames wait, so no robot's crowd slows the others "
+                             f"(default {defaults.robot_handling_share:g})")
     parser.add_argument("--trusted-proxy", action="append", default=[], metavar="ADDR[/BITS]",
                         help="a reverse proxy (nginx) whose X-Real-IP / X-Forwarded-For name "
                              "the client, so per-address budgets apply to students, not to "
@@ -181,7 +187,8 @@ def limits_from(args: argparse.Namespace) -> ClientLimits:
     return ClientLimits(max_rate=args.max_rate, max_frame_bytes=args.max_frame_bytes,
                         max_queued_bytes=args.max_queued_bytes, max_clients=args.max_clients,
                         address_max_connections=args.max_connections_per_address,
-                        address_max_rate=args.max_rate_per_address)
+                        address_max_rate=args.max_rate_per_address,
+                        robot_handling_share=args.handling_share_per_robot)
 
 
 def owned_names(args: argparse.Namespace) -> Callable[[str], bool] | None:

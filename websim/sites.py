@@ -32,7 +32,7 @@ from ros_nodes.robot_interface import ROBOTS_PREFIX
 from ros_nodes.robot_server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.clock import Clock
-from rosbridge.core.limits import ClientLimits, OriginPolicy
+from rosbridge.core.limits import ClientLimits, LatchedBytes, OriginPolicy
 from rosbridge.transport.front import WebSocketFront
 
 
@@ -166,7 +166,8 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
     try:
         classroom = Classroom(roster, make_robot, open_class=args.open_class,
                               max_robots=args.max_robots, idle_pause_s=args.idle_pause,
-                              lazy=args.worker, clock=clock, state=state)
+                              lazy=args.worker, clock=clock, state=state,
+                              latched=LatchedBytes.for_server(limits))
     except BaseException:
         state.close()
         raise

@@ -44,6 +44,7 @@ from rosbridge.core.encoding import parse_json
 from rosbridge.core.errors import BridgeError, ServiceError
 from rosbridge.core.faults import Faults
 from rosbridge.core.graph_port import Graph, GraphPort
+from rosbridge.core.limits import ClientLimits, LatchedBytes
 from rosbridge.core.outbox import Frame
 from rosbridge.core.schema import NAME_FIELDS, ProtocolError, read_operation, resolve_name
 from rosbridge.core.session import Flush, Session, take_flush
@@ -69,6 +70,8 @@ class Bridge:
             (``Session.may_drive``) may not do; None: every client may.
         service_timeout_s: how long a call to a client-provided service may take.
         faults: where unexpected exceptions are recorded (default: a new record).
+        latched: the pool clients' latched messages are counted in (its robot's, within
+            its server's: ``LatchedBytes.for_robot``; default: one of the default size).
 
     Attributes:
         sessions: the connected clients.
@@ -86,7 +89,8 @@ class Bridge:
                  faults: Faults | None = None,
                  refusals: tuple[type[Exception], ...] = (),
                  reserved_namespaces: tuple[str, ...] = (),
-                 drive_rules: access.DriveRules | None = None) -> None:
+                 drive_rules: access.DriveRules | None = None,
+                 latched: LatchedBytes | None = None) -> None:
         self.reserved_namespaces = reserved_namespaces
         """Where clients may not offer services or actions: the owner's own nodes'."""
         self.drive_rules = drive_rules
@@ -95,7 +99,10 @@ class Bridge:
         self.refusals: tuple[type[Exception], ...] = (BridgeError, MessageError, *refusals)
         self.faults = faults or Faults()
         self.graph = GraphPort(lambda: self.topics.relayed_topics())
-        self._context = BridgeContext(self.clock, self.faults, self.refusals, self.graph)
+        self.latched = latched or LatchedBytes.for_server(ClientLimits()).for_robot()
+        """What clients' latched messages on this bridge hold (bytes)."""
+        self._context = BridgeContext(self.clock, self.faults, self.refusals, self.graph,
+                                      self.latched)
         self.sessions: set[Session] = self._context.sessions
         self.topics = Topics(self._context)
         self.services = Services(self._context, service_timeout_s)

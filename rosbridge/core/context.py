@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from rosbridge.core.clock import Clock
 from rosbridge.core.faults import Faults
 from rosbridge.core.graph_port import GraphPort
+from rosbridge.core.limits import LatchedBytes
 from rosbridge.core.session import Ready, Session
 
 
@@ -26,6 +27,8 @@ class BridgeContext:
         faults: where unexpected exceptions are recorded.
         refusals: what an in-process handler raises to refuse with a reason (not a fault).
         graph: the port to a ROS 2 graph (does nothing until one is attached).
+        latched: the bytes of clients' latched messages this bridge holds, within its
+            server's (``LatchedBytes``).
         sessions: the connected clients.
         ready: the clients whose outboxes got frames since the bridge last handed them to
             the transport (each ``Session.ready`` is this set once connected).
@@ -37,6 +40,7 @@ class BridgeContext:
     faults: Faults
     refusals: tuple[type[Exception], ...]
     graph: GraphPort
+    latched: LatchedBytes
     sessions: set[Session] = field(default_factory=set)
     ready: Ready = field(default_factory=dict)
     closing: Ready = field(default_factory=dict)

@@ -91,6 +91,14 @@ class ClientLimits:
         address_enrolments: new robots one address may enrol in an open class at once
             (burst); beyond it the handshake is refused (HTTP 429) until the budget refills.
         address_enrolments_per_s: how fast that budget refills (enrolments/s).
+        robot_handling_share: fraction of one core the server spends on the input of all the
+            clients of one robot together, from every address (a crowd of students on the
+            instructor's demo robot); beyond it their frames wait, so no robot's clients
+            can take the core from the other robots.
+        robot_latched_bytes: what clients' latched messages on one robot may hold together
+            (bytes as they arrived, each at most ``max_latched_bytes``; their encodings hold
+            at most about six times as much); beyond it a latched publish is refused.
+        server_latched_bytes: the same for all the robots of one server together.
     """
 
     max_rate: float = DEFAULT_MAX_RATE
@@ -122,6 +130,9 @@ class ClientLimits:
     address_bytes_per_s: int = 8 << 20
     address_enrolments: int = 60
     address_enrolments_per_s: float = 1.0
+    robot_handling_share: float = 0.5
+    robot_latched_bytes: int = 1 << 20
+    server_latched_bytes: int = 16 << 20
 
     def __post_init__(self) -> None:
         for item in dataclasses.fields(self):
@@ -238,6 +249,14 @@ class AddressBudget:
         self._bytes.charge(frame_bytes)
         self._handling.charge(handling_s)
 
+    def charge_time(self, handling_s: float) -> None:
+        """Charge time spent for this address beyond handling frames (its costly formats)."""
+        self._handling.charge(handling_s)
+
+    def handling_wait_s(self) -> float:
+        """How long until this address's handling time is no longer in debt (0: now)."""
+        return self._handling.wait_s()
+
     def enrol(self) -> bool:
         """Take one enrolment; False if this address enrolled too many too fast."""
         return self._enrolments.take(1)
@@ -324,6 +343,115 @@ class AddressBudgets:
                 budget.robots[robot] = left
             else:
                 budget.robots.pop(robot, None)
+
+
+class RobotBudget:
+    """What all the clients of one robot spend together, from every address: handling time.
+
+    Charged as ``AddressBudget`` is (a connection of a robot in debt waits before its next
+    frame is handled, and before its costly formats are made), so a crowd on one robot slows
+    that robot's clients, never the other robots'.
+    """
+
+    def __init__(self, limits: ClientLimits, clock: Callable[[], float]) -> None:
+        self.connections = 0
+        self._handling = TokenBucket(limits.robot_handling_share,
+                                     limits.robot_handling_share * 2, clock)  # 2 s worth
+
+    def wait_s(self) -> float:
+        """How long the robot's clients' next frame must wait (0: now)."""
+        return self._handling.wait_s()
+
+    def charge_time(self, handling_s: float) -> None:
+        """Charge time spent for one of the robot's clients."""
+        self._handling.charge(handling_s)
+
+    def idle(self) -> bool:
+        """No connection and no debt: it can be forgotten."""
+        return self.connections == 0 and self._handling.full()
+
+
+class RobotBudgets:
+    """Each robot's ``RobotBudget``, kept while it has connections (or debt).
+
+    Args:
+        limits: the bounds (``robot_handling_share``).
+        clock: monotonic time (s).
+    """
+
+    def __init__(self, limits: ClientLimits,
+                 clock: Callable[[], float] = WALL_CLOCK.monotonic_s) -> None:
+        self._limits = limits
+        self._clock = clock
+        self._budgets: dict[str, RobotBudget] = {}
+
+    def __len__(self) -> int:
+        return len(self._budgets)
+
+    def opened(self, robot: str) -> RobotBudget:
+        """Count a connection to ``robot``; its budget."""
+        budget = self._budgets.get(robot)
+        if budget is None:
+            for name in [n for n, b in self._budgets.items() if b.idle()]:
+                del self._budgets[name]
+            budget = self._budgets[robot] = RobotBudget(self._limits, self._clock)
+        budget.connections += 1
+        return budget
+
+    def closed(self, robot: str) -> None:
+        """Count a connection to ``robot`` gone."""
+        budget = self._budgets.get(robot)
+        if budget is not None:
+            budget.connections -= 1
+
+
+class LatchedBytes:
+    """Bytes of clients' latched messages held, bounded here and in the pool above.
+
+    A server holds one pool (``server_latched_bytes``), each of its robots one of its own
+    within it (``for_robot``: ``robot_latched_bytes``): a latched message fits when it fits
+    both.
+
+    Args:
+        limit_bytes: what this pool may hold.
+        parent: the pool it is part of (None: the server's).
+        robot_limit_bytes: the limit of each robot's pool made by ``for_robot``.
+    """
+
+    def __init__(self, limit_bytes: int, parent: LatchedBytes | None = None,
+                 robot_limit_bytes: int = 0) -> None:
+        self.limit_bytes = limit_bytes
+        self.held_bytes = 0
+        self.parent = parent
+        self._robot_limit_bytes = robot_limit_bytes or limit_bytes
+
+    @classmethod
+    def for_server(cls, limits: ClientLimits) -> LatchedBytes:
+        """A server's pool, by ``limits``."""
+        return cls(limits.server_latched_bytes, robot_limit_bytes=limits.robot_latched_bytes)
+
+    def for_robot(self) -> LatchedBytes:
+        """A robot's pool within this server's."""
+        return LatchedBytes(self._robot_limit_bytes, self)
+
+    def refusal(self, added: int, released: int = 0) -> str | None:
+        """Why ``added`` more bytes (``released`` freed at once) do not fit; None: they do."""
+        pool: LatchedBytes | None = self
+        while pool is not None:
+            held = pool.held_bytes - released
+            if held + added > pool.limit_bytes:
+                whose = "this robot's" if pool.parent is not None else "this server's"
+                return (f"{whose} latched messages hold {held} bytes; with this one they would "
+                        f"exceed {pool.limit_bytes}")
+            pool = pool.parent
+        return None
+
+    def change(self, delta: int) -> None:
+        """Count ``delta`` bytes more (or fewer) held, here and in every pool above."""
+        pool: LatchedBytes | None = self
+        while pool is not None:
+            pool.held_bytes += delta
+            pool = pool.parent
 
 
 def budget_key(address: str) -> str:

@@ -19,7 +19,13 @@ from websockets.exceptions import ConnectionClosed
 from websockets.protocol import State
 
 from rosbridge.core.clock import WALL_CLOCK, Clock
-from rosbridge.core.limits import AddressBudget, ClientLimits, RateLimit, TokenBucket
+from rosbridge.core.limits import (
+    AddressBudget,
+    ClientLimits,
+    RateLimit,
+    RobotBudget,
+    TokenBucket,
+)
 from rosbridge.core.outbox import Frame, Outbox
 from rosbridge.core.session import Flush, Session
 from rosbridge.transport.schedule import Schedule
@@ -93,11 +99,14 @@ class BridgeConnection:
         clock: the clock of its budgets and its watchdog (default: wall time).
         address: what all the connections of its client address spend together (messages,
             handling time, bytes); None: only its own budgets (the instructor's root view).
+        robot: what all the clients of its robot spend together (handling time), from every
+            address; None: no such budget (the instructor's root view).
     """
 
     def __init__(self, hub: Hub, schedule: Schedule, connection: ServerConnection, peer: str,
                  is_admin: bool, limits: ClientLimits, wire: WireFrames | None = None,
-                 clock: Clock = WALL_CLOCK, address: AddressBudget | None = None) -> None:
+                 clock: Clock = WALL_CLOCK, address: AddressBudget | None = None,
+                 robot: RobotBudget | None = None) -> None:
         self._schedule = schedule
         self._writers: Writers = schedule.writers
         self._bridge = hub
@@ -113,6 +122,7 @@ class BridgeConnection:
         self._handling = TokenBucket(limits.handling_share, limits.handling_burst_s,
                                      clock.monotonic_s)
         self._address = address
+        self._robot = robot
         self._held_until_s = 0.0
         """Until when frames read may be a backlog its address's budget held back (then
         reading them faster than ``max_rate`` is no flood of the client's)."""
@@ -154,8 +164,10 @@ class BridgeConnection:
                                     FLOOD_CLOSE_TIMEOUT_S)
                         return  # its further frames are not even read: the close ends it
                 wait_s = self._handling.wait_s()
-                if self._address is not None and (held_s := self._address.wait_s()) > 0:
-                    wait_s = max(wait_s, held_s)  # its address's budget: all its connections'
+                held_s = max(self._address.wait_s() if self._address is not None else 0.0,
+                             self._robot.wait_s() if self._robot is not None else 0.0)
+                if held_s > 0:  # its address's or its robot's budget: shared with others
+                    wait_s = max(wait_s, held_s)
                     self._held_until_s = self._clock.monotonic_s() + held_s + 1.0
                 if wait_s > 0:  # its budget is spent: its frames wait, its socket backs up
                     await asyncio.sleep(wait_s)
@@ -167,6 +179,8 @@ class BridgeConnection:
                 self._handling.charge(handling_s)
                 if self._address is not None:
                     self._address.charge(len(frame), handling_s)
+                if self._robot is not None:
+                    self._robot.charge_time(handling_s)
         except ConnectionClosed:
             pass
 
@@ -187,7 +201,7 @@ class BridgeConnection:
             return
         if self._backed_up.is_set() or self._connection.protocol.state is not State.OPEN:
             return
-        if self._handling.wait_s() > 0 and outbox.has_deferred():
+        if self._encoding_wait_s() > 0 and outbox.has_deferred():
             outbox.behind = True  # its costly formats wait for its budget, in its writer
             self._backed_up.set()
             return
@@ -218,7 +232,7 @@ class BridgeConnection:
                 watchdog = asyncio.create_task(self._watch())
                 try:
                     while outbox.overflowed is None:
-                        wait_s = self._handling.wait_s()
+                        wait_s = self._encoding_wait_s()
                         if wait_s > 0 and outbox.has_deferred():
                             self._pacing = True
                             try:
@@ -242,16 +256,27 @@ class BridgeConnection:
             pass
 
     def _charge_encoding(self) -> None:
-        """Charge the client's handling budget with the costly formats made for it.
+        """Charge the client's handling budgets with the costly formats made for it.
 
         Its ``png``, ``cbor-raw`` and fragmented frames are made when they are written
         (``outbox.Deferred``): the client that asked pays, in time it is then read and
-        written more slowly, never the tick nor the publisher.
+        written more slowly, and so do its address and its robot (many connections, each
+        asking a little, pay together), never the tick nor the publisher.
         """
         outbox = self.session.outbox
         if outbox.encode_s:
             self._handling.charge(outbox.encode_s)
+            if self._address is not None:
+                self._address.charge_time(outbox.encode_s)
+            if self._robot is not None:
+                self._robot.charge_time(outbox.encode_s)
             outbox.encode_s = 0.0
+
+    def _encoding_wait_s(self) -> float:
+        """How long its costly formats must wait: the debt of its, its address's or robot's."""
+        return max(self._handling.wait_s(),
+                   self._address.handling_wait_s() if self._address is not None else 0.0,
+                   self._robot.wait_s() if self._robot is not None else 0.0)
 
     async def _watch(self) -> None:
         """Close the client if it lets too much pile up, or its socket stops accepting.

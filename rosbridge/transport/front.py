@@ -32,7 +32,13 @@ from websockets.http11 import Request, Response
 
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.clock import WALL_CLOCK, Clock
-from rosbridge.core.limits import AddressBudgets, ClientLimits, OriginPolicy, TrustedProxies
+from rosbridge.core.limits import (
+    AddressBudgets,
+    ClientLimits,
+    OriginPolicy,
+    RobotBudgets,
+    TrustedProxies,
+)
 from rosbridge.transport.connection import (
     MAX_CLOSE_REASON_BYTES,
     POLICY_VIOLATION,
@@ -89,6 +95,8 @@ class WebSocketFront(abc.ABC):
         self.proxies = proxies or TrustedProxies()
         self.addresses = AddressBudgets(self.limits, clock.monotonic_s)
         """What each client address holds and spends, all its connections together."""
+        self.robot_budgets = RobotBudgets(self.limits, clock.monotonic_s)
+        """What the clients of each robot spend together, from every address."""
         self.clock = clock
         self.started_monotonic_s = clock.monotonic_s()
         self.refusals = LogThrottle(log, clock)
@@ -242,14 +250,16 @@ class WebSocketFront(abc.ABC):
         if token and not is_admin:
             self.refusals.note(address, "token", "presented a wrong admin token")
         budget = self.addresses.opened(address, name)
+        robot_budget = self.robot_budgets.opened(name or "")
         try:
             client = BridgeConnection(host.bridge, host.schedule, connection, peer, is_admin,
-                                      self.limits, self.wire, self.clock, budget)
+                                      self.limits, self.wire, self.clock, budget, robot_budget)
             client.session.may_drive = self.may_drive(name, is_admin)
             client.session.url_path = target.path
             await client.run()
         finally:
             self.addresses.closed(address, name)
+            self.robot_budgets.closed(name or "")
 
     def root_limits(self) -> ClientLimits:
         """The limits of the instructor's root view (default: a client's)."""

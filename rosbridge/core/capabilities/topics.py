@@ -60,14 +60,6 @@ text's length (plus its JSON and CBOR): a latched message holds at most about si
 size, whatever its subscribers ask for."""
 
 
-MAX_LATCHED_BYTES_PER_ROBOT = 1 << 20
-"""What clients' latched messages on one robot may hold together (bytes as they arrived,
-each at most ``ClientLimits.max_latched_bytes``; their encodings hold at most about six
-times as much, ``VARIANT_BYTES_FACTOR``): 16 messages of the largest size. A server holds
-at most this times its robots; the robot's own latched topics are not counted (they are
-its fixed few)."""
-
-
 @dataclass
 class _Latched:
     """A topic's latched message and whose it is.
@@ -76,7 +68,8 @@ class _Latched:
         encoded: the message, with its encodings.
         owner: the client that published it, None for an in-process endpoint's (the
             robot's, the ROS graph's): it goes when its owner leaves or unadvertises.
-        size: what it counts against ``MAX_LATCHED_BYTES_PER_ROBOT`` (0 for in-process).
+        size: what it counts in the robot's and the server's latched pools
+            (``BridgeContext.latched``; 0 for in-process).
     """
 
     encoded: Encoded
@@ -270,8 +263,6 @@ class Topics:
         """Each latched topic's newest latched message (rosbridge gives it to every new
         subscriber), owned by its publisher: dropped when that client leaves or
         unadvertises the topic, as rosbridge drops a publisher's latched message with it."""
-        self.latched_bytes = 0
-        """Bytes of clients' latched messages held (``MAX_LATCHED_BYTES_PER_ROBOT``)."""
         self._subscribed_types: dict[str, str] = {}
         """Types named by subscriptions to topics of no other known type (rosbridge infers
         a publisher's type from them); dropped with the last subscriber."""
@@ -310,7 +301,7 @@ class Topics:
         """Make ``latched`` ``topic``'s latched message, in place of any before it."""
         self._unlatch(topic)
         self._latched[topic] = latched
-        self.latched_bytes += latched.size
+        self._context.latched.change(latched.size)
 
     def _unlatch(self, topic: str, owner: Session | None = None) -> None:
         """Drop ``topic``'s latched message (only if ``owner``'s, when one is given)."""
@@ -318,7 +309,7 @@ class Topics:
         if latched is None or (owner is not None and latched.owner is not owner):
             return
         del self._latched[topic]
-        self.latched_bytes -= latched.size
+        self._context.latched.change(-latched.size)
 
     def latched_topics(self) -> dict[str, int]:
         """Each latched topic and the bytes it counts (in-process ones: 0)."""
@@ -445,13 +436,10 @@ class Topics:
         if latch and size > session.limits.max_latched_bytes:
             raise BridgeError(f"publish to {topic}: a latched message may be at most "
                               f"{session.limits.max_latched_bytes} bytes, this one is {size}")
-        if latch:
-            held = self.latched_bytes - self._latched_size(topic)
-            if held + size > MAX_LATCHED_BYTES_PER_ROBOT:
-                raise BridgeError(f"publish to {topic}: this robot's latched messages hold "
-                                  f"{held} bytes; with this one they would exceed "
-                                  f"{MAX_LATCHED_BYTES_PER_ROBOT}; message dropped (publish "
-                                  "it without latch, or unadvertise a latched topic)")
+        if latch and (full := self._context.latched.refusal(
+                size, self._latched_size(topic))) is not None:
+            raise BridgeError(f"publish to {topic}: {full}; message dropped (publish it "
+                              "without latch, or unadvertise a latched topic)")
         if not session.relay_budget.take(size):
             raise BridgeError(f"publish to {topic}: more than "
                               f"{session.limits.relay_bytes_per_s} bytes/s published; "
