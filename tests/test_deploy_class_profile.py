@@ -7,8 +7,10 @@ the compose file declares, and the real nginx accepts that file (``nginx -t``).
 
 from __future__ import annotations
 
+import ipaddress
 import subprocess
 from pathlib import Path
+from typing import Any
 
 import pytest
 import yaml
@@ -59,12 +61,13 @@ def test_docker_compose_config_accepts_the_class_profile_beside_the_stack() -> N
         assert set(services) == {BRIDGE, WEB, CLASS_NGINX, *workers}
         for name in (CLASS_NGINX, *workers):
             assert services[name]["profiles"] == [CLASS_PROFILE], name
-            assert services[name]["networks"] == services[BRIDGE]["networks"], name
+            assert set(services[name]["networks"]) == set(services[BRIDGE]["networks"]), name
             assert services[name]["restart"] == "unless-stopped", name
-        for worker in workers:
+        for index, worker in enumerate(workers):
             body = services[worker]
             assert body["build"] == services[BRIDGE]["build"], "the ros2-web-bridge image"
-            assert body["environment"]["CLASS_ADMIN_TOKEN"] == token
+            assert body["environment"] == {"CLASS_ADMIN_TOKEN": token,
+                                           "WORKER_INDEX": str(index)}
             assert "ports" not in body, "reached through the class's nginx only"
             assert set(body["volumes"]) == {f"{PROJECT_DIR / 'class'}:/class:ro",
                                             f"{WEB_DIR}:/opt/websim/web-interface:ro"}
@@ -75,25 +78,48 @@ def test_docker_compose_config_accepts_the_class_profile_beside_the_stack() -> N
         published = {(port["published"], port["target"]) for port in nginx["ports"]}
         http, ws = class_ports()
         assert published == {(int(http), int(http)), (int(ws), int(ws))}
+        subnet = result_subnet(yaml.safe_load(result.stdout))
+        assert ipaddress.ip_address(nginx_address(services)) in subnet, "nginx's fixed address"
         stack = {port["published"] for name in (BRIDGE, WEB) for port in services[name]["ports"]}
         assert stack == {8080, 9090}, "the stack's ports are as they were"
         assert not stack & {host for host, _ in published}, "the class collides with the stack"
 
 
+def result_subnet(config: dict[str, Any]) -> ipaddress.IPv4Network:
+    """The class network's fixed subnet."""
+    (network,) = config["networks"].values()
+    (pool,) = network["ipam"]["config"]
+    return ipaddress.IPv4Network(pool["subnet"])
+
+
+def nginx_address(services: dict[str, Any]) -> str:
+    """The class nginx's fixed address in its network."""
+    (network,) = services[CLASS_NGINX]["networks"].values()
+    return str(network["ipv4_address"])
+
+
 def test_a_class_worker_runs_websim_serve_on_its_ports_and_refuses_without_a_token() -> None:
     """Each worker's ``sh -c`` script run here for real, with ``exec websim`` replaced by a
-    printf of its arguments, which websim's own parser then reads."""
+    printf of its arguments, which websim's own parser then reads: its ports, which worker it
+    is (the same list and order as nginx's), and nginx as its only trusted proxy."""
     http, ws = class_ports()
-    for worker in class_workers():
+    workers = class_workers()
+    services = compose()["services"]
+    for index, worker in enumerate(workers):
         script = worker_script(worker)
         assert "exec websim serve " in script
         refused = subprocess.run(["sh", "-c", script], env=compose_env(), capture_output=True,
                                  text=True, timeout=10, check=False)
         assert refused.returncode != 0 and refused.stdout == ""
         assert "set CLASS_ADMIN_TOKEN, the instructor's token" in refused.stderr
+        unplaced = subprocess.run(["sh", "-c", script], env=compose_env(CLASS_ADMIN_TOKEN="t"),
+                                  capture_output=True, text=True, timeout=10, check=False)
+        assert unplaced.returncode != 0 and "set WORKER_INDEX" in unplaced.stderr
         printing = script.replace("exec websim", "exec printf '%s\\n' websim")
+        environment = services[worker]["environment"]
         printed = subprocess.run(["sh", "-c", printing],
-                                 env=compose_env(CLASS_ADMIN_TOKEN="two words"),
+                                 env=compose_env(CLASS_ADMIN_TOKEN="two words",
+                                                 WORKER_INDEX=environment["WORKER_INDEX"]),
                                  capture_output=True, text=True, timeout=10, check=True)
         argv = printed.stdout.splitlines()
         assert argv[:2] == ["websim", "serve"]
@@ -102,6 +128,9 @@ def test_a_class_worker_runs_websim_serve_on_its_ports_and_refuses_without_a_tok
         assert (args.http_port, args.ws_port, args.admin_token) == (int(http), int(ws),
                                                                      "two words")
         assert args.public_ws_port is None, "its own WebSocket port is the public one"
+        assert args.worker_index == index
+        assert args.workers == [f"{name}:{http}:{ws}" for name in workers]
+        assert args.trusted_proxy == [nginx_address(services)]
         healthcheck = compose()["services"][worker]["healthcheck"]["test"]
         assert f"http://127.0.0.1:{http}/healthz" in " ".join(healthcheck)
     nginx_check = compose()["services"][CLASS_NGINX]["healthcheck"]["test"]
