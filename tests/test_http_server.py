@@ -22,6 +22,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from urllib.parse import urljoin, urlsplit
@@ -308,14 +309,21 @@ def test_a_thousand_half_open_connections_do_not_lock_out_a_browser(
     assert "Traceback" not in "".join(limited.output)
 
 
+class Transport:
+    """What the table asks of an asyncio transport: its peer, and abort."""
+
+    def __init__(self, peer: str = "127.0.0.1") -> None:
+        self.aborted = False
+        self.peer = peer
+
+    def abort(self) -> None:
+        self.aborted = True
+
+    def get_extra_info(self, name: str) -> object:
+        return (self.peer, 40000) if name == "peername" else None
+
+
 def test_connection_table_evicts_the_longest_idle_and_never_a_busy_one() -> None:
-    class Transport:
-        def __init__(self) -> None:
-            self.aborted = False
-
-        def abort(self) -> None:
-            self.aborted = True
-
     async def scenario() -> list[bool]:
         table = ConnectionTable(cap=2)
         a, b, c, d = (Transport() for _ in range(4))
@@ -329,6 +337,67 @@ def test_connection_table_evicts_the_longest_idle_and_never_a_busy_one() -> None
         return [a.aborted, b.aborted, c.aborted, d.aborted, len(table) == 2]
 
     assert asyncio.run(scenario()) == [False, True, False, True, True]
+
+
+def test_one_address_holds_its_share_of_connections_and_evicts_only_its_own() -> None:
+    """Beyond ``address_cap``, an address's newcomer evicts that address's longest-idle
+    connection, never another address's; all of its own answering, the newcomer is
+    refused; a trusted proxy is not capped."""
+    async def scenario() -> None:
+        table = ConnectionTable(cap=100, address_cap=2,
+                                uncapped=lambda address: address == "10.0.0.9")
+        healthy = Transport("127.0.0.1")
+        table.opened("healthy", healthy)
+        mine = [Transport("127.0.0.2") for _ in range(4)]
+        table.opened("m0", mine[0])
+        table.opened("m1", mine[1])
+        table.opened("m2", mine[2])  # evicts m0, its own longest idle
+        assert [t.aborted for t in mine[:3]] == [True, False, False]
+        table.begin("m1")
+        table.begin("m2")
+        table.opened("m3", mine[3])  # all of its own answering: refused
+        assert mine[3].aborted and not healthy.aborted and len(table) == 3
+        proxy = [Transport("10.0.0.9") for _ in range(5)]
+        for number, transport in enumerate(proxy):
+            table.opened(f"p{number}", transport)
+        assert not any(t.aborted for t in proxy) and len(table) == 8
+        table.end("m1")
+        table.closed("m1")
+        table.opened("m4", Transport("127.0.0.2"))  # room again
+        assert len(table) == 8
+
+    asyncio.run(scenario())
+
+
+def test_a_real_server_keeps_one_addresses_idle_sockets_to_its_share() -> None:
+    """Idle sockets from 127.0.0.2 beyond its share (twice --max-connections-per-address)
+    evict its own oldest; a keep-alive connection of 127.0.0.1 opened first still answers."""
+    running = start_server(["--max-connections-per-address", "5"])
+    try:
+        with socket.create_connection(("127.0.0.1", running.http_port)) as kept:
+            attacker = []
+            for _ in range(16):
+                sock = socket.socket()
+                sock.bind(("127.0.0.2", 0))
+                sock.connect(("127.0.0.1", running.http_port))
+                attacker.append(sock)
+            time.sleep(0.5)
+            closed = 0
+            for sock in attacker:
+                sock.settimeout(0.2)
+                try:
+                    closed += sock.recv(1) == b""
+                except ConnectionResetError:
+                    closed += 1
+                except TimeoutError:
+                    pass
+            assert closed == 16 - 10, closed
+            kept.sendall(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")
+            assert kept.recv(12) == b"HTTP/1.1 200"
+            for sock in attacker:
+                sock.close()
+    finally:
+        assert running.stop() == 0
 
 
 def test_http_port_in_use_is_a_one_line_error() -> None:

@@ -15,6 +15,11 @@ Connections are bounded by construction, for a classroom on one process's file d
 * at most ``connection_cap()`` connections are open, a quarter of the process's open-file
   limit (the rest is for WebSockets and files); a connection beyond it evicts the one idle
   the longest, so a thousand stalled sockets cannot lock out a browser;
+* one client address holds at most ``address_cap`` of them (twice its WebSocket connections,
+  ``ClientLimits.address_max_connections``: a class of 40 behind one NAT address loading the
+  page at once); beyond it its own longest-idle one goes, or, all of its own answering (a
+  client that asks for files and stops reading), the newcomer is refused: one address cannot
+  hold every slot. A trusted proxy (``--trusted-proxy``) is not capped;
 * the listen backlog (``LISTEN_BACKLOG``) holds a whole class loading the page at once.
 
 Files are read into memory on first use and again when they change (the allow-list bounds
@@ -43,6 +48,7 @@ from aiohttp import web
 from aiohttp.abc import AbstractAccessLogger
 
 from ros_nodes.robot_interface import ROBOTS_PREFIX
+from rosbridge.core.limits import ClientLimits, TrustedProxies, budget_key
 from websim.web_files import CONTENT_TYPES, published
 
 log = logging.getLogger("websim.http")
@@ -180,9 +186,15 @@ def connection_cap(open_file_limit: int) -> int:
     return max(MIN_CONNECTION_CAP, open_file_limit // FD_SHARE_FOR_HTTP)
 
 
+def address_connection_cap(limits: ClientLimits) -> int:
+    """The most HTTP connections one client address holds at once (twice its WebSockets)."""
+    return 2 * limits.address_max_connections
+
+
 @dataclass
 class _Connection:
     transport: asyncio.Transport
+    address: str | None
     busy: bool = False
     timer: asyncio.TimerHandle | None = None
 
@@ -193,33 +205,60 @@ class ConnectionTable:
     Each has a timer: ``IDLE_TIMEOUT_S`` while no request is in progress, ``REQUEST_TIMEOUT_S``
     while one is; when it fires the connection is aborted. Beyond ``cap`` connections, the one
     idle longest is aborted to make room (never one answering a request); when every one is
-    answering, the newcomer is refused.
+    answering, the newcomer is refused. Likewise per client address beyond ``address_cap``,
+    among that address's own connections only.
+
+    Args:
+        cap: connections open at once.
+        address_cap: connections of one client address (IPv6: its /64) open at once.
+        uncapped: the addresses ``address_cap`` does not apply to (trusted proxies).
     """
 
-    def __init__(self, cap: int) -> None:
+    def __init__(self, cap: int, address_cap: int | None = None,
+                 uncapped: Callable[[str], bool] = lambda address: False) -> None:
         self.cap = cap
+        self.address_cap = address_cap or cap
+        self._uncapped = uncapped
         self._open: OrderedDict[object, _Connection] = OrderedDict()
+        self._per_address: dict[str, int] = {}
 
     def __len__(self) -> int:
         return len(self._open)
 
     def opened(self, key: object, transport: asyncio.Transport) -> None:
         """A connection was accepted: make room for it and start its idle timer."""
-        if len(self._open) >= self.cap:
-            idle = next((k for k, conn in self._open.items() if not conn.busy), None)
-            if idle is None:
-                log.debug("HTTP connection refused: %d connections all answering", self.cap)
-                transport.abort()
-                return
-            self._abort(idle)
-        self._open[key] = connection = _Connection(transport)
+        address = _address_of(transport)
+        if address is not None and self._uncapped(address):
+            address = None
+        if address is not None and self._per_address.get(address, 0) >= self.address_cap \
+                and not self._make_room(transport, lambda c: c.address == address,
+                                        f"{self.address_cap} connections of {address}"):
+            return
+        if len(self._open) >= self.cap and not self._make_room(
+                transport, lambda c: True, f"{self.cap} connections"):
+            return
+        self._open[key] = connection = _Connection(transport, address)
+        if address is not None:
+            self._per_address[address] = self._per_address.get(address, 0) + 1
         self._arm(key, connection, IDLE_TIMEOUT_S)
+
+    def _make_room(self, newcomer: asyncio.Transport, among: Callable[[_Connection], bool],
+                   what: str) -> bool:
+        """Abort the longest-idle ``among`` those open; none idle: refuse ``newcomer`` (False)."""
+        idle = next((k for k, conn in self._open.items() if among(conn) and not conn.busy),
+                    None)
+        if idle is None:
+            log.debug("HTTP connection refused: %s, all answering", what)
+            newcomer.abort()
+            return False
+        self._abort(idle)
+        return True
 
     def closed(self, key: object) -> None:
         """A connection ended, however."""
         connection = self._open.pop(key, None)
-        if connection is not None and connection.timer is not None:
-            connection.timer.cancel()
+        if connection is not None:
+            self._forget(connection)
 
     def begin(self, key: object) -> None:
         """A request's headers arrived: it is answering now."""
@@ -245,9 +284,26 @@ class ConnectionTable:
     def _abort(self, key: object) -> None:
         connection = self._open.pop(key, None)
         if connection is not None:
-            if connection.timer is not None:
-                connection.timer.cancel()
+            self._forget(connection)
             connection.transport.abort()
+
+    def _forget(self, connection: _Connection) -> None:
+        if connection.timer is not None:
+            connection.timer.cancel()
+        if connection.address is not None:
+            left = self._per_address.get(connection.address, 1) - 1
+            if left > 0:
+                self._per_address[connection.address] = left
+            else:
+                self._per_address.pop(connection.address, None)
+
+
+def _address_of(transport: asyncio.Transport) -> str | None:
+    """Whose budget a connection spends: its peer's address (IPv6: its /64), or None."""
+    peer = transport.get_extra_info("peername")
+    if isinstance(peer, tuple) and peer:
+        return budget_key(str(peer[0]))
+    return None
 
 
 class _TrackedServer(web.Server):
@@ -311,12 +367,12 @@ class HttpServer:
     """The web interface's HTTP server; ``start_http`` starts one, ``close()`` stops it."""
 
     def __init__(self, web_dir: Path, health: Callable[[str | None], dict[str, Any]],
-                 live: LiveDocuments, cap: int) -> None:
+                 live: LiveDocuments, connections: ConnectionTable) -> None:
         self._web_dir = os.path.realpath(web_dir)
         self._health = health
         self._live = live
         self._assets: dict[str, _Asset] = {}  # by real path in the web folder
-        self.connections = ConnectionTable(cap)
+        self.connections = connections
         protocol_log = _ClientFaultLogger("websim.http.protocol")
         protocol_log.parent = log
         self._server = _TrackedServer(
@@ -470,7 +526,8 @@ class LiveDocuments(Protocol):
 
 async def start_http(host: str, port: int, directory: Path,
                      health: Callable[[str | None], dict[str, Any]],
-                     live: LiveDocuments) -> HttpServer:
+                     live: LiveDocuments, limits: ClientLimits | None = None,
+                     proxies: TrustedProxies | None = None) -> HttpServer:
     """Serve the web interface on ``host:port`` on the running event loop.
 
     Raises the process's soft open-file limit to the hard one first, and sizes the
@@ -484,13 +541,19 @@ async def start_http(host: str, port: int, directory: Path,
             none), called on the loop per request.
         live: the live ``robot.json`` and ``config.json`` and the robots of a class,
             likewise.
+        limits: the client limits (``address_max_connections`` sizes each address's share
+            of connections; default: the defaults).
+        proxies: the trusted proxies, whose connections are not capped per address.
 
     Raises:
         OSError: the port cannot be bound (in use, say).
     """
     cap = connection_cap(raise_open_file_limit())
-    server = HttpServer(directory, health, live, cap)
-    log.debug("HTTP connections capped at %d", cap)
+    address_cap = address_connection_cap(limits or ClientLimits())
+    trusted = proxies or TrustedProxies()
+    server = HttpServer(directory, health, live,
+                        ConnectionTable(cap, address_cap, trusted.trusts))
+    log.debug("HTTP connections capped at %d, %d per address", cap, address_cap)
     try:
         await server.listen(host, port)
     except OSError:
