@@ -417,3 +417,23 @@ def test_class_ros_namespaced_students_drive_their_own_robots(graph: Graph,
         assert scans[-1][1].header.frame_id == "robot01/laser"
     finally:
         assert server.stop() == 0, "".join(server.output)
+
+
+def test_class_ros_keeps_discovery_on_this_machine_unless_told(
+        graph: Graph, domain: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """With neither ROS_AUTOMATIC_DISCOVERY_RANGE nor ROS_LOCALHOST_ONLY in its environment, a
+    class with --ros limits discovery to this machine (the banner says so) and a node here
+    still reaches its robots; an exported range is kept."""
+    monkeypatch.delenv("ROS_AUTOMATIC_DISCOVERY_RANGE")  # the server's environment only:
+    monkeypatch.delenv("ROS_LOCALHOST_ONLY")  # this test's node started with LOCALHOST
+    server = start_server(["--class", "1", "--ros"])
+    try:
+        graph.spin_until(lambda: graph.node.count_publishers("/robot01/odom") > 0,
+                         STARTUP_TIMEOUT_S, "the class's robot on this machine's graph")
+    finally:
+        assert server.stop() == 0, "".join(server.output)
+    assert "discovery range LOCALHOST" in "".join(server.output)
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET")
+    server = start_server(["--class", "1", "--ros"])
+    assert server.stop() == 0, "".join(server.output)
+    assert "discovery range SUBNET" in "".join(server.output)
