@@ -12,6 +12,9 @@ so the server sees two client addresses, as it would see two machines.
   subscribed to ``/odom``. Printed: every healthy client's ``/odom`` rate over the window
   (from the stamps it received), how many flooders were admitted and how the others were
   refused, and the messages/s the attacker sent. Target: every healthy client >= 19 Hz.
+  With ``--addresses 8`` the flooders come from 127.0.0.2 to 127.0.0.9, each address within
+  its own budgets: only the budget of the robots they flood (``robot_handling_share``) holds
+  them.
 * **idle**: ``--idlers`` (500) idle sockets from the attacker to a classmate's robot
   (robot02), then its owner connects from 127.0.0.1. Printed: admitted and refused sockets,
   the refusal, and whether the owner got in. Target: the owner connects.
@@ -106,8 +109,13 @@ async def drain(connection: ClientConnection) -> None:
             pass
 
 
+def attacker_addresses(count: int) -> list[str]:
+    """``count`` attacker addresses: 127.0.0.2, 127.0.0.3, ..."""
+    return [f"127.0.0.{2 + k}" for k in range(count)]
+
+
 async def flood_run(ws_port: int, flooders: int, rate: float, seconds: float,
-                    robots: int) -> dict[str, Any]:
+                    robots: int, addresses: int = 1) -> dict[str, Any]:
     base = f"ws://{HEALTHY}:{ws_port}/robots/"
     listeners = []
     for index in range(2, robots + 2):
@@ -116,7 +124,9 @@ async def flood_run(ws_port: int, flooders: int, rate: float, seconds: float,
         listeners.append(Listener(opened))
     await asyncio.sleep(1.0)
     own = [f"robot{index:02d}" for index in (1, robots + 2, robots + 3)]
-    attempts = await asyncio.gather(*(open_from(f"{base}{own[k % len(own)]}", ATTACKER)
+    sources = attacker_addresses(addresses)
+    attempts = await asyncio.gather(*(open_from(f"{base}{own[k % len(own)]}",
+                                                sources[k % len(sources)])
                                       for k in range(flooders)))
     admitted = [a for a in attempts if not isinstance(a, str)]
     refusals = sorted({a for a in attempts if isinstance(a, str)})
@@ -176,16 +186,24 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--robots", type=int, default=20, help="healthy robots (default 20)")
     parser.add_argument("--idlers", type=int, default=500)
     parser.add_argument("--seconds", type=float, default=10.0)
+    parser.add_argument("--addresses", type=int, default=1,
+                        help="spread the flooders over this many addresses, 127.0.0.2 on "
+                             "(default 1: one student; 8: a crowd, each address within "
+                             "its own budget, held by the robots' budgets)")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--handling-share-per-robot", default=None, metavar="FRACTION",
+                        help="passed to websim serve (e.g. 100: no robot budget, to compare)")
     args = parser.parse_args(argv)
     import resource
 
     _, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     resource.setrlimit(resource.RLIMIT_NOFILE, (hard, hard))
     with tempfile.TemporaryDirectory() as log_dir, \
-            running_server(Path(log_dir), ["--class", str(args.robots + 3)]) as server:
+            running_server(Path(log_dir), ["--class", str(args.robots + 3), *(
+                ["--handling-share-per-robot", args.handling_share_per_robot]
+                if args.handling_share_per_robot else [])]) as server:
         flooded = asyncio.run(flood_run(server.ws_port, args.flooders, args.flood_rate,
-                                        args.seconds, args.robots))
+                                        args.seconds, args.robots, args.addresses))
         time.sleep(1.0)
         idle = asyncio.run(idle_run(server.ws_port, args.idlers))
         errors = [line for line in server.log_tail(100000).splitlines() if " ERROR " in line]
@@ -193,8 +211,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps(result, indent=2))
     else:
-        print(f"flood: {args.flooders} connections from {ATTACKER} at {args.flood_rate:g} msg/s "
-              f"each, {args.robots} healthy robots on {HEALTHY}")
+        sources = attacker_addresses(args.addresses)
+        print(f"flood: {args.flooders} connections from {', '.join(sources)} at "
+              f"{args.flood_rate:g} msg/s each, {args.robots} healthy robots on {HEALTHY}")
         for key, value in flooded.items():
             print(f"  {key}: {value}")
         print(f"idle: {args.idlers} idle sockets from {ATTACKER} to robot02, then its owner")
