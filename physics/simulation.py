@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from physics.frames import map_to_odom
 from physics.kinematics import clamp_command
 from physics.lidar import Lidar, ScanRequest, scan_many
 from physics.odometry import OdometryIntegrator
@@ -179,6 +180,15 @@ class Simulation:
         """True pose and body-frame velocity in the ``map`` frame."""
         pose = self._robot.pose
         return Odometry(pose.x, pose.y, pose.theta, self._robot.v, self._robot.omega)
+
+    def map_to_odom(self) -> Pose2D:
+        """The ``odom`` frame in ``map`` (m, rad): what perfect localization publishes.
+
+        The ground truth composed with the inverse of the odometry, so that map -> odom ->
+        base_link is the true pose however far the odometry has drifted.
+        """
+        odom = self._odometry.odometry()
+        return map_to_odom(self._robot.pose, Pose2D(odom.x, odom.y, odom.theta))
 
     @property
     def scan_is_current(self) -> bool:

@@ -12,6 +12,10 @@ The format (every coordinate in the ``map`` frame, metres and radians)::
       - {center: [x, y], size: [width, height], yaw: 0.0}
     circles:                     # solid discs
       - {center: [x, y], radius: r}
+    map_resolution_m: 0.05       # /map's cell side (m); default DEFAULT_MAP_RESOLUTION_M
+    localization: none           # none | perfect: websim publishes map -> odom itself
+    noise:                       # overrides the parameter file's noise section, key by key
+      odom_linear_sigma_mps: 0.02
 
 Boxes and polylines become wall segments; circles stay circles. Every error raises
 ``ConfigError`` naming the file and the entry, e.g. ``worlds/maze.yaml: walls[3]: ...``.
@@ -19,6 +23,7 @@ Boxes and polylines become wall segments; circles stay circles. Every error rais
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from dataclasses import dataclass
@@ -27,6 +32,8 @@ from typing import Any
 
 import yaml
 
+from physics.map_grid import DEFAULT_MAP_RESOLUTION_M, check_resolution, grid_over
+from physics.params import NoiseParams
 from physics.shipped import shipped
 from physics.snapshots import Pose2D
 from physics.validation import (
@@ -45,7 +52,14 @@ WORLDS_DIR = shipped("physics", "worlds")
 MIN_WALL_LENGTH_M = 1e-6
 """Shorter walls are refused: they have no direction, and the ray-cast normal is undefined."""
 
-_TOP_LEVEL_KEYS = ("name", "start", "walls", "polylines", "boxes", "circles")
+LOCALIZATIONS = ("none", "perfect")
+"""What localizes the robot: ``none`` (the default: AMCL or SLAM publishes map -> odom, as on
+the real robot, and websim must not fight them) or ``perfect`` (websim publishes map -> odom
+from the ground truth, so map-frame tools work without a localizer)."""
+
+_TOP_LEVEL_KEYS = ("name", "start", "walls", "polylines", "boxes", "circles",
+                   "map_resolution_m", "localization", "noise")
+_NOISE_KEYS = tuple(item.name for item in dataclasses.fields(NoiseParams))
 
 
 @dataclass(frozen=True)
@@ -121,6 +135,10 @@ class World:
         circles: every solid disc.
         source: the file it was loaded from (or a label), for error messages.
         boxes: every solid rectangle (as walls already; kept for drawing them filled).
+        map_resolution_m: the side of a cell of its occupancy map, /map (m).
+        localization: one of ``LOCALIZATIONS``: who publishes map -> odom.
+        noise: noise sigmas that override the parameter file's, as (``NoiseParams`` field,
+            value) pairs (``noise_over``).
     """
 
     name: str
@@ -129,6 +147,13 @@ class World:
     circles: tuple[CircleObstacle, ...]
     source: str
     boxes: tuple[BoxObstacle, ...] = ()
+    map_resolution_m: float = DEFAULT_MAP_RESOLUTION_M
+    localization: str = LOCALIZATIONS[0]
+    noise: tuple[tuple[str, float], ...] = ()
+
+    def noise_over(self, base: NoiseParams) -> NoiseParams:
+        """``base`` (the parameter file's noise) with this world's sigmas in place of its."""
+        return dataclasses.replace(base, **dict(self.noise))
 
     @property
     def bounds(self) -> tuple[float, float, float, float]:
@@ -191,7 +216,7 @@ def world_from_dict(document: Any, *, source: str = "<world>") -> World:
     boxes = [_box(source, f"boxes[{index}]", entry)
              for index, entry in enumerate(_as_list(source, top, "boxes"))]
     for box in boxes:
-        where, corners = box.origin, _corners(box)
+        where, corners = box.origin, box_corners(box)
         for side in range(4):
             (ax, ay), (bx, by) = corners[side], corners[(side + 1) % 4]
             walls.append(Wall(ax, ay, bx, by, where))
@@ -199,13 +224,42 @@ def world_from_dict(document: Any, *, source: str = "<world>") -> World:
                for index, entry in enumerate(_as_list(source, top, "circles"))]
 
     for box in boxes:
-        if _inside_convex(_corners(box), start.x, start.y):
+        if _inside_convex(box_corners(box), start.x, start.y):
             raise fail(f"{source}: start", f"{list(start)} is inside the box {box.origin}")
     for circle in circles:
         if math.hypot(start.x - circle.x, start.y - circle.y) < circle.radius_m:
             raise fail(f"{source}: start", f"{list(start)} is inside the circle {circle.origin}")
-    return World(name=name, start=start, walls=tuple(walls), circles=tuple(circles),
-                 source=source, boxes=tuple(boxes))
+    world = World(name=name, start=start, walls=tuple(walls), circles=tuple(circles),
+                  source=source, boxes=tuple(boxes),
+                  map_resolution_m=check_resolution(
+                      f"{source}: map_resolution_m",
+                      top.get("map_resolution_m", DEFAULT_MAP_RESOLUTION_M)),
+                  localization=_localization(source, top.get("localization", LOCALIZATIONS[0])),
+                  noise=_noise(source, top.get("noise")))
+    grid_over(world.bounds, world.map_resolution_m, f"{source}: map_resolution_m")
+    return world
+
+
+def _localization(source: str, value: Any) -> str:
+    if value not in LOCALIZATIONS:
+        raise fail(f"{source}: localization", f"must be one of {', '.join(LOCALIZATIONS)}, "
+                                              f"got {value!r}")
+    return str(value)
+
+
+def _noise(source: str, value: Any) -> tuple[tuple[str, float], ...]:
+    """The world's ``noise`` section: sigmas checked as the parameter file's are."""
+    if value is None:
+        return ()
+    where = f"{source}: noise"
+    mapping = as_mapping(where, value)
+    check_keys(where, mapping, _NOISE_KEYS)
+    try:
+        checked = NoiseParams(**mapping)
+    except ConfigError as error:
+        raise ConfigError(f"{where}.{error}") from None
+    return tuple((name, float(getattr(checked, name))) for name in _NOISE_KEYS
+                 if name in mapping)
 
 
 def _as_list(source: str, top: Any, key: str) -> list[Any]:
@@ -254,8 +308,8 @@ def _box(source: str, where: str, entry: Any) -> BoxObstacle:
     return BoxObstacle(cx, cy, width, height, yaw, where)
 
 
-def _corners(box: BoxObstacle) -> list[tuple[float, float]]:
-    """The box's corners, counter-clockwise."""
+def box_corners(box: BoxObstacle) -> list[tuple[float, float]]:
+    """The box's corners in the map frame (m), counter-clockwise."""
     cos_yaw, sin_yaw = math.cos(box.yaw_rad), math.sin(box.yaw_rad)
     corners = []
     for ux, uy in ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)):
