@@ -15,6 +15,7 @@ from typing import Any
 from physics import MODES, ConfigError, NoiseParams, RobotParams, Simulation
 from physics.params import field_range, field_unit
 from physics.validation import as_finite_float, as_float_in_range
+from physics.world import LOCALIZATIONS
 from rosbridge.msgs.values import Base64Bytes, Message
 
 # rcl_interfaces/msg/ParameterType
@@ -153,6 +154,9 @@ def _noise(name: str, description: str) -> ParameterSpec:
 CMD_VEL_TIMEOUT_OFF_S = 0.0
 """The course's behaviour: the robot keeps the last command however old it is."""
 
+WORLD_LOCALIZATION = "world"
+"""``localization``'s default: as the world file says (``none`` unless it says otherwise)."""
+
 MAX_SEED = 2**32 - 1
 """Largest noise seed (numpy accepts any, ROS integers are 64-bit; 32 bits is plenty)."""
 
@@ -177,6 +181,11 @@ PARAMETERS = (
     _noise("scan_sigma_m", "noise on every LiDAR hit"),
     ParameterSpec("params_file", PARAMETER_STRING, "robot, LiDAR and noise parameter file "
                   "(YAML)", "", "config/pi4b_params.yaml", set_by=AT_START, embedded=False),
+    ParameterSpec("localization", PARAMETER_STRING,
+                  "who publishes map -> odom: none (a localizer: AMCL, slam_toolbox), perfect "
+                  "(this node, from the ground truth) or world (as the world file says)", "",
+                  WORLD_LOCALIZATION, choices=(WORLD_LOCALIZATION, *LOCALIZATIONS),
+                  set_by=AT_START, embedded=False),
     ParameterSpec("cmd_vel_stamped", PARAMETER_BOOL,
                   "subscribe /cmd_vel as geometry_msgs/TwistStamped (as Jazzy's navigation "
                   "stack publishes) instead of Twist", "", False, set_by=AT_START,

@@ -54,15 +54,18 @@ ODOM = TopicSpec("/odom", "nav_msgs/msg/Odometry", "out", 1, "reliable",
                  "wheel odometry, frame odom, child base_link")
 SCAN = TopicSpec("/scan", "sensor_msgs/msg/LaserScan", "out", 2, "sensor_data",
                  "360-beam LiDAR, frame laser")
-TF = TopicSpec("/tf", "tf2_msgs/msg/TFMessage", "out", 1, "reliable", "odom -> base_link")
+TF = TopicSpec("/tf", "tf2_msgs/msg/TFMessage", "out", 1, "reliable",
+               "odom -> base_link; also map -> odom with localization: perfect")
 TF_STATIC = TopicSpec("/tf_static", "tf2_msgs/msg/TFMessage", "out", 0, "transient_local",
                       "base_link -> laser")
 GROUND_TRUTH = TopicSpec("/ground_truth", "nav_msgs/msg/Odometry", "out", 1, "reliable",
                          "true pose, frame map (simulation only)")
 WORLD = TopicSpec("/world", "visualization_msgs/msg/MarkerArray", "out", 0, "transient_local",
                   "the walls, frame map (simulation only)")
+MAP = TopicSpec("/map", "nav_msgs/msg/OccupancyGrid", "out", 0, "transient_local",
+                "the world's occupancy grid, frame map (as nav2's map_server publishes it)")
 
-ROBOT_TOPICS = (CMD_VEL, ODOM, SCAN, TF, TF_STATIC, GROUND_TRUTH, WORLD)
+ROBOT_TOPICS = (CMD_VEL, ODOM, SCAN, TF, TF_STATIC, GROUND_TRUTH, WORLD, MAP)
 """Every topic of the virtual robot, in the README's order."""
 
 PUBLISHED_TOPICS = tuple(spec for spec in ROBOT_TOPICS if spec.direction == "out")

@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from physics import ConfigError, LaserScan, Odometry, World
+from physics.occupancy import OccupancyGrid, rasterise
 from physics.validation import as_finite_float
 from rosbridge.msgs.values import Base64Bytes, Float32Sequence, Message, stamp, typed_sequence
 
@@ -191,6 +192,49 @@ def world_markers_msg(world: World, time_s: float) -> Message:
         markers.append(_marker(time_s, index, MARKER_CUBE, pose,
                                vector3(box.width_m, box.height_m, 0.3), WALL_COLOR, []))
     return {"markers": markers}
+
+
+MAPS_KEPT = 32
+"""Worlds whose maps (grid and message data) are kept for the next robot in the same world:
+a class's robots share one map per world instead of each holding ~0.1 MB of it."""
+
+
+@functools.lru_cache(maxsize=MAPS_KEPT)
+def world_map(world: World) -> OccupancyGrid:
+    """``world``'s occupancy grid at its ``map_resolution_m``, made once per world (read-only).
+
+    Raises:
+        ConfigError: the world's grid is beyond ``physics.map_grid.MAX_MAP_CELLS``.
+    """
+    return rasterise(world)
+
+
+@functools.lru_cache(maxsize=MAPS_KEPT)
+def _map_data(grid: OccupancyGrid) -> list[Any]:
+    """``OccupancyGrid.data`` of ``grid``, made once per grid and shared: never modify it."""
+    return typed_sequence("int8", grid.cells.ravel().tolist())
+
+
+def occupancy_grid_msg(grid: OccupancyGrid, time_s: float) -> Message:
+    """``nav_msgs/OccupancyGrid`` of a rasterised world, in ``map``.
+
+    ``info.origin`` is the lower-left corner of cell (0, 0), unrotated; ``data`` is row-major
+    with row 0 at the origin's y (``physics.occupancy``). ``info.map_load_time`` is when it
+    was made, as map_server stamps it.
+    """
+    geometry = grid.geometry
+    return {
+        "header": header(time_s, MAP_FRAME),
+        "info": {
+            "map_load_time": stamp(time_s),
+            "resolution": geometry.resolution_m,
+            "width": geometry.width,
+            "height": geometry.height,
+            "origin": {"position": vector3(geometry.origin_x_m, geometry.origin_y_m),
+                       "orientation": yaw_quaternion(0.0)},
+        },
+        "data": _map_data(grid),
+    }
 
 
 def twist_from_msg(msg: Any, stamped: bool = False) -> tuple[float, float]:

@@ -12,8 +12,9 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from physics import Simulation
+from physics import ConfigError, Simulation
 from physics.simulation import cast_scans
+from physics.world import LOCALIZATIONS
 from ros_nodes.robot_interface import GROUND_TRUTH, ODOM, SCAN, TF, TopicSpec
 from ros_nodes.robot_messages import (
     BASE_FRAME,
@@ -75,6 +76,18 @@ def odometry_transform(sim: Simulation, stamp_s: float) -> Message:
                                          odom.theta)])
 
 
+def localized_transforms(sim: Simulation, stamp_s: float) -> Message:
+    """``/tf`` with perfect localization: map -> odom from the ground truth, odom -> base_link.
+
+    map -> odom is ``Simulation.map_to_odom``, so the chain map -> odom -> base_link is the
+    true pose (REP 105) however far the odometry has drifted.
+    """
+    correction, odom = sim.map_to_odom(), sim.odometry()
+    return tf_msg([
+        transform_stamped_msg(stamp_s, MAP_FRAME, ODOM_FRAME, *correction),
+        transform_stamped_msg(stamp_s, ODOM_FRAME, BASE_FRAME, odom.x, odom.y, odom.theta)])
+
+
 def ground_truth(sim: Simulation, stamp_s: float) -> Message:
     """``/ground_truth``: the true pose and speeds in ``map`` (simulation only)."""
     return odometry_msg(sim.ground_truth(), stamp_s, MAP_FRAME)
@@ -90,5 +103,25 @@ ODOMETRY_TF = Sensor(TF, odometry_transform)
 GROUND_TRUTH_POSE = Sensor(GROUND_TRUTH, ground_truth)
 LIDAR = Sensor(SCAN, laser_scan, sheddable=True, prepare_many=cast_scans)
 
+LOCALIZED_TF = Sensor(TF, localized_transforms)
+
 ROBOT_SENSORS = (ODOMETRY, ODOMETRY_TF, GROUND_TRUTH_POSE, LIDAR)
-"""What the robot publishes per tick, in the order it publishes it."""
+"""What the robot publishes per tick, in the order it publishes it (no localization: AMCL or
+SLAM publishes map -> odom, as on the real robot)."""
+
+
+def robot_sensors(localization: str) -> tuple[Sensor, ...]:
+    """What the robot publishes with ``localization`` (``physics.world.LOCALIZATIONS``).
+
+    ``perfect``: /tf also carries map -> odom.
+
+    Raises:
+        ConfigError: not one of ``LOCALIZATIONS``.
+    """
+    if localization not in LOCALIZATIONS:
+        raise ConfigError(f"localization: must be one of {', '.join(LOCALIZATIONS)}, "
+                          f"got {localization!r}")
+    if localization == "perfect":
+        return tuple(LOCALIZED_TF if sensor is ODOMETRY_TF else sensor
+                     for sensor in ROBOT_SENSORS)
+    return ROBOT_SENSORS

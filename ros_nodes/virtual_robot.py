@@ -13,10 +13,10 @@ by the server (see ``rosbridge.graph.relay``).
 
 Parameters (``ros2 param describe /virtual_robot NAME`` shows each): ``mode``, ``mass_kg``,
 ``inertia_kg_m2``, ``max_linear_mps``, ``max_angular_rps``, ``max_wheel_force_n`` and
-``cmd_vel_timeout_s`` change at runtime; ``world``, ``params_file``, ``seed``, the noise sigmas
-and ``cmd_vel_stamped`` are read at start (read-only afterwards). ``use_sim_time:=true`` makes
-the node publish ``/clock`` (simulated time, which keeps counting across resets) and stamp
-with it. Bad values are refused with the reason; nothing changes.
+``cmd_vel_timeout_s`` change at runtime; ``world``, ``params_file``, ``seed``, the noise
+sigmas, ``localization`` and ``cmd_vel_stamped`` are read at start (read-only afterwards).
+``use_sim_time:=true`` makes the node publish ``/clock`` (simulated time, which keeps counting
+across resets) and stamp with it. Bad values are refused with the reason; nothing changes.
 """
 
 from __future__ import annotations
@@ -62,6 +62,7 @@ from ros_nodes.parameters import (
     PARAMETER_INTEGER,
     PARAMETERS,
     RUNTIME_PARAMETERS,
+    WORLD_LOCALIZATION,
     ParameterSpec,
     parameter_spec,
 )
@@ -193,7 +194,8 @@ class VirtualRobotNode(Node):
 
     Args:
         robot: the robot to wrap; None builds one from the parameters ``world``,
-            ``params_file`` and ``seed`` and the noise sigmas.
+            ``params_file``, ``seed``, ``localization`` and the noise sigmas (each sigma's
+            default: the world's ``noise``, else the parameter file's).
         access: how to reach ``robot`` (default: directly; ``websim serve --ros`` passes one
             that runs on the server's event loop).
         own_timer: tick the robot with a 20 Hz timer; with False, whoever owns the robot
@@ -278,15 +280,18 @@ class VirtualRobotNode(Node):
         """The robot the start-up parameters describe (they are validated as declared)."""
         params_file = str(_declare(self, parameter_spec("params_file"),
                                    str(SHIPPED_PARAMS_FILE)))
-        world = str(_declare(self, parameter_spec("world")))
+        world = load_world(str(_declare(self, parameter_spec("world"))))
         seed = int(_declare(self, parameter_spec("seed")))
+        localization = str(_declare(self, parameter_spec("localization")))
         platform = load_params(params_file)
+        defaults = world.noise_over(platform.noise)
         noise = NoiseParams(**{
-            spec.name: float(_declare(self, spec, float(getattr(platform.noise, spec.name))))
+            spec.name: float(_declare(self, spec, float(getattr(defaults, spec.name))))
             for spec in _NOISE_PARAMETERS})
-        sim = Simulation(load_world(world), platform.robot, seed=seed, lidar=platform.lidar,
-                         noise=noise)
-        return VirtualRobot(sim, clock=NodeClock(self))
+        sim = Simulation(world, platform.robot, seed=seed, lidar=platform.lidar, noise=noise)
+        return VirtualRobot(sim, clock=NodeClock(self),
+                            localization=None if localization == WORLD_LOCALIZATION
+                            else localization)
 
     def _declare_robot_parameters(self) -> None:
         """Declare the runtime parameters at their current values; overrides apply at once."""
@@ -294,6 +299,7 @@ class VirtualRobotNode(Node):
             sim = self.robot.sim
             _declare(self, parameter_spec("world"), sim.world.source)
             _declare(self, parameter_spec("seed"), sim.seed or 0)
+            _declare(self, parameter_spec("localization"), self.robot.localization)
             for spec in _NOISE_PARAMETERS:
                 _declare(self, spec, float(getattr(sim.noise, spec.name)))
         parameters = self.robot.parameters

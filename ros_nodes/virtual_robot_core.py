@@ -11,17 +11,27 @@ from collections.abc import Container
 from typing import Any
 
 from physics import Simulation
+from physics.occupancy import OccupancyGrid
 from ros_nodes.parameters import RobotParameters
-from ros_nodes.robot_interface import CMD_VEL, CMD_VEL_STAMPED_TYPE, TF_STATIC, WORLD, TopicSpec
+from ros_nodes.robot_interface import (
+    CMD_VEL,
+    CMD_VEL_STAMPED_TYPE,
+    MAP,
+    TF_STATIC,
+    WORLD,
+    TopicSpec,
+)
 from ros_nodes.robot_messages import (
     BASE_FRAME,
     LASER_FRAME,
+    occupancy_grid_msg,
     tf_msg,
     transform_stamped_msg,
     twist_from_msg,
+    world_map,
     world_markers_msg,
 )
-from ros_nodes.sensors import ROBOT_SENSORS, Sensor
+from ros_nodes.sensors import Sensor, robot_sensors
 from ros_nodes.tap import IN, OUT, Tap
 from rosbridge.core.clock import Clock, WallClock
 from rosbridge.msgs.values import Message
@@ -40,20 +50,32 @@ class VirtualRobot:
         clock: the one clock of the robot: its ``stamp_s`` stamps the messages (s since the
             epoch in wall time, as a real robot stamps them), its ``monotonic_s`` times the
             robot's host (idle time, throttles, the last command's age). Default: wall time.
-        sensors: what it publishes per tick, in that order (``ros_nodes.sensors``).
+        sensors: what it publishes per tick, in that order (default: ``robot_sensors`` of its
+            ``localization``).
+        localization: ``none`` or ``perfect`` (``physics.world.LOCALIZATIONS``: whether
+            websim publishes map -> odom); default: the world's.
+
+    Raises:
+        ConfigError: an unknown localization.
 
     Attributes:
         clock: the clock the stamps come from, and its host's intervals.
         sensors: what it publishes per tick (``ros_nodes.sensors``).
+        localization: who publishes map -> odom: ``none`` (a localizer) or ``perfect`` (this
+            robot, from the ground truth).
+        map: the world's occupancy grid, /map (``physics.occupancy``), made once per world.
         tap: sees every /cmd_vel the robot accepts and every message it publishes per tick
             (``ros_nodes.tap``); while a callback listens, every message is built (the rclpy
             node of ``websim serve --ros`` publishes them on the ROS graph through it).
     """
 
     def __init__(self, sim: Simulation, clock: Clock | None = None,
-                 sensors: tuple[Sensor, ...] = ROBOT_SENSORS) -> None:
+                 sensors: tuple[Sensor, ...] | None = None,
+                 localization: str | None = None) -> None:
         self.sim = sim
-        self.sensors = sensors
+        self.localization = sim.world.localization if localization is None else localization
+        self.sensors = robot_sensors(self.localization) if sensors is None else sensors
+        self.map: OccupancyGrid = world_map(sim.world)
         self.parameters = RobotParameters(sim)
         self.tap = Tap()
         self.clock: Clock = WallClock() if clock is None else clock
@@ -131,13 +153,18 @@ class VirtualRobot:
         return out
 
     def latched(self) -> list[Publication]:
-        """The transient-local messages: /tf_static (base_link -> laser) and /world."""
+        """The transient-local messages: /tf_static (base_link -> laser), /world and /map.
+
+        The world never changes while the robot runs (a reset keeps it), so these are sent
+        once, at start, and to every later subscriber.
+        """
         now_s = self.clock.stamp_s()
         lidar = self.sim.lidar.params
         laser = transform_stamped_msg(now_s, BASE_FRAME, LASER_FRAME, lidar.mount_x_m,
                                       lidar.mount_y_m, lidar.mount_yaw_rad)
         return [(TF_STATIC, tf_msg([laser])),
-                (WORLD, world_markers_msg(self.sim.world, now_s))]
+                (WORLD, world_markers_msg(self.sim.world, now_s)),
+                (MAP, occupancy_grid_msg(self.map, now_s))]
 
     def reset(self) -> None:
         """Back to spawn with odometry zeroed (``/reset_simulation``)."""

@@ -15,7 +15,7 @@ from physics.world import WORLDS_DIR
 from ros_nodes.robot_description import robot_json
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.clock import WallClock
-from websim import compare_command, sites
+from websim import compare_command, map_command, sites
 from websim import serve as serve_command
 
 DEFAULT_WORLD = str(WORLDS_DIR / "empty.yaml")
@@ -71,6 +71,14 @@ def build_parser() -> argparse.ArgumentParser:
     nginx_config.add_arguments(proxy)
     proxy.set_defaults(run=nginx_config.run)
 
+    map_files = commands.add_parser(
+        "map", help="write a world's occupancy map as nav2 map_server's NAME.yaml and NAME.pgm",
+        description="Rasterise a world into the occupancy grid /map carries and write it as "
+                    "the map_server pair NAME.yaml and NAME.pgm (NAME: the world file's name), "
+                    "for map_server, AMCL or slam_toolbox on a real ROS 2 install.")
+    map_command.add_arguments(map_files)
+    map_files.set_defaults(run=map_command.run)
+
     describe = commands.add_parser(
         "robot-json", help="print the robot.json the web page reads (limits, topics, params)",
         description="Print the robot description the web page reads: speed limits, footprint, "
@@ -95,10 +103,14 @@ def _add_sim_arguments(parser: argparse.ArgumentParser, *, mode: bool = True) ->
 
 
 def make_simulation(args: argparse.Namespace) -> Simulation:
-    """Build the simulation the common arguments describe."""
+    """Build the simulation the common arguments describe.
+
+    The world's ``noise`` section, if any, overrides the parameter file's sigmas.
+    """
     platform = load_params(args.params)
-    return Simulation(load_world(args.world), platform.robot, mode=args.mode, seed=args.seed,
-                      lidar=platform.lidar, noise=platform.noise)
+    world = load_world(args.world)
+    return Simulation(world, platform.robot, mode=args.mode, seed=args.seed,
+                      lidar=platform.lidar, noise=world.noise_over(platform.noise))
 
 
 def _run_demo(args: argparse.Namespace) -> int:
@@ -135,14 +147,16 @@ def _run_serve(args: argparse.Namespace) -> int:
     limits, origins = serve_command.limits_from(args), serve_command.origins_from(args)
     clock = WallClock()  # the one clock of the server: every robot's, the class's
     if args.class_spec is None:
-        site = sites.single_robot(VirtualRobot(make_simulation(args), clock), token, limits,
-                                  origins, args.public_ws_port or args.ws_port)
+        robot = VirtualRobot(make_simulation(args), clock, localization=args.localization)
+        site = sites.single_robot(robot, token, limits, origins,
+                                  args.public_ws_port or args.ws_port)
         return serve_command.run(args, site, token)
 
     def make_robot(student: Student) -> VirtualRobot:
         world = args.world if student.world is None else student.world
         return VirtualRobot(make_simulation(argparse.Namespace(**{**vars(args),
-                                                                 "world": world})), clock)
+                                                                 "world": world})), clock,
+                            localization=args.localization)
 
     platform = load_params(args.params)
     return serve_command.run(args, sites.classroom_site(

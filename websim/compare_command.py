@@ -169,7 +169,8 @@ def run(args: argparse.Namespace) -> int:
             progress.update()
 
         result = compare(world, segments, robot, seed=args.seed, lidar=platform.lidar,
-                         noise=platform.noise, controller=controller, on_tick=tick)
+                         noise=world.noise_over(platform.noise), controller=controller,
+                         on_tick=tick)
 
     written = [write_trajectory(result, out / "trajectory.csv"),
                write_summary(result, out / "summary.json")]

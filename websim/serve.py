@@ -26,6 +26,7 @@ from classroom.nginx_config import parse_worker, worker_for, worker_ring
 from classroom.registry import DEFAULT_IDLE_PAUSE_S, DEFAULT_MAX_ROBOTS
 from physics import ConfigError
 from physics.shipped import shipped
+from physics.world import LOCALIZATIONS
 from ros_nodes.robot_interface import NODE_NAME
 from ros_nodes.robot_server import SimServer
 from rosbridge.core.limits import ClientLimits, OriginPolicy, TrustedProxies
@@ -152,6 +153,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--public-http-port", type=int, default=None, metavar="PORT",
                         help="the page port students reach (a proxy's), for the links file "
                              "(default --http-port)")
+    parser.add_argument("--localization", choices=LOCALIZATIONS, default=None,
+                        help="who publishes map -> odom on /tf: 'perfect', websim, from the "
+                             "ground truth; 'none', a localizer (AMCL, slam_toolbox), as on the "
+                             "real robot (default: the world's 'localization', else none)")
     parser.add_argument("--ros", action="store_true",
                         help="also run the virtual_robot node on the ROS 2 graph and relay "
                              "rosbridge topics to it (needs rclpy: pip install '.[ros]')")
