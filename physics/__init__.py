@@ -12,7 +12,7 @@ from physics.lidar import Lidar
 from physics.params import LidarParams, NoiseParams, PlatformParams, RobotParams, load_params
 from physics.robot import MODES, MobileRobotPhysics
 from physics.simulation import TICK_PERIOD_S, Simulation
-from physics.snapshots import Command, LaserScan, Odometry, Pose2D, RobotState
+from physics.snapshots import Command, LaserScan, Odometry, Pose2D, RobotState, WheelState
 from physics.validation import ConfigError
 from physics.world import World, load_world
 
@@ -32,6 +32,7 @@ __all__ = [
     "RobotParams",
     "RobotState",
     "Simulation",
+    "WheelState",
     "World",
     "compare_modes",
     "load_commands",

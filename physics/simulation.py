@@ -24,9 +24,10 @@ from physics.lidar import Lidar, ScanRequest, scan_many
 from physics.odometry import OdometryIntegrator
 from physics.params import LidarParams, NoiseParams, RobotParams
 from physics.robot import MobileRobotPhysics
-from physics.snapshots import Command, LaserScan, Odometry, Pose2D, RobotState
+from physics.snapshots import Command, LaserScan, Odometry, Pose2D, RobotState, WheelState
 from physics.space import WALLS_ONLY, WorldSpace, build_world_space
 from physics.validation import ConfigError, as_finite_float
+from physics.wheels import WheelEncoders
 from physics.world import World
 
 TICK_PERIOD_S = 0.05
@@ -67,6 +68,7 @@ class Simulation:
         self._robot = MobileRobotPhysics(params, self._world_space, world.start, mode)
         self._lidar = Lidar(LidarParams() if lidar is None else lidar, self._world_space)
         self._odometry = OdometryIntegrator()
+        self._wheels = WheelEncoders()
         self._seed = seed
         self._seed_noise(seed)
         self._command = Command(0.0, 0.0)
@@ -149,6 +151,9 @@ class Simulation:
             v_noise = self._draw_noise(self._noise.odom_linear_sigma_mps)
             omega_noise = self._draw_noise(self._noise.odom_angular_sigma_rps)
             self._odometry.integrate(samples, v_noise, omega_noise)
+            params = self._robot.params
+            self._wheels.integrate(samples, params.half_wheelbase_m, params.wheel_radius_m,
+                                   v_noise, omega_noise)
             self._tick += 1
 
     def _seed_noise(self, seed: int | None) -> None:
@@ -175,6 +180,10 @@ class Simulation:
     def odometry(self) -> Odometry:
         """Wheel odometry in the ``odom`` frame: zero at spawn, integrated from the encoders."""
         return self._odometry.odometry()
+
+    def wheels(self) -> WheelState:
+        """The drive wheels' angles and speeds, as the encoders odometry reads count them."""
+        return self._wheels.state()
 
     def ground_truth(self) -> Odometry:
         """True pose and body-frame velocity in the ``map`` frame."""
@@ -262,6 +271,7 @@ class Simulation:
                          f"{list(pose)}")
         self._robot.teleport(pose)
         self._odometry.place(odometry)
+        self._wheels.reset()
         self._command = Command(0.0, 0.0)
         self._scan_cache = None
 
@@ -277,6 +287,7 @@ class Simulation:
             self._episode += 1
         self._robot.teleport(self._world.start)
         self._odometry.reset()
+        self._wheels.reset()
         self._command = Command(0.0, 0.0)
         self._tick = 0
         self._scan_cache = None

@@ -84,6 +84,23 @@ class LaserScan(NamedTuple):
     time_increment: float
 
 
+class WheelState(NamedTuple):
+    """The two drive wheels, as their encoders count them (``sensor_msgs/JointState``).
+
+    Attributes:
+        left_rad: left wheel angle since spawn or reset, about its axle (+y of base_link:
+            positive rolls forward); not wrapped (rad).
+        right_rad: right wheel angle, likewise (rad).
+        left_rad_s: left wheel angular speed over the last encoder sample (rad/s).
+        right_rad_s: right wheel angular speed, likewise (rad/s).
+    """
+
+    left_rad: float
+    right_rad: float
+    left_rad_s: float
+    right_rad_s: float
+
+
 class RobotState(NamedTuple):
     """Everything that changes in one tick, for transports that publish it.
 
