@@ -1,9 +1,11 @@
 """The robot attached to its bridge like a client of the hub: one path in, one path out.
 
 The robot subscribes /cmd_vel (``Topics.subscribe_local``: it gets what clients publish, in
-canonical form, as any subscriber would) and publishes its topics (``Topics.publish``), which
-it owns: clients may not publish them. Its services (parameters, reset, rosapi) are added to
-the bridge's service capability.
+canonical form, as any subscriber would) as both ``geometry_msgs/Twist`` and
+``TwistStamped`` (what Jazzy-era nav2 publishes): each client's commands are of the type
+it advertised, and the latest command of either drives the robot. It publishes its topics
+(``Topics.publish``), which it owns: clients may not publish them. Its services (parameters,
+reset, rosapi) are added to the bridge's service capability.
 """
 
 from __future__ import annotations
@@ -11,9 +13,9 @@ from __future__ import annotations
 from typing import Any
 
 from physics import ConfigError
-from ros_nodes.robot_interface import CMD_VEL, PUBLISHED_TOPICS
+from ros_nodes.robot_interface import CMD_VEL, CMD_VEL_STAMPED_TYPE, PUBLISHED_TOPICS
 from ros_nodes.robot_services import add_robot_services
-from ros_nodes.virtual_robot_core import VirtualRobot
+from ros_nodes.virtual_robot_core import Publication, VirtualRobot
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.session import Session
 
@@ -40,13 +42,27 @@ class RobotEndpoint:
         for spec in PUBLISHED_TOPICS:
             bridge.topics.own(spec.name, spec.type)
         bridge.topics.subscribe_local(CMD_VEL.name, CMD_VEL.type, self._on_cmd_vel)
+        bridge.topics.subscribe_local(CMD_VEL.name, CMD_VEL_STAMPED_TYPE,
+                                      self._on_cmd_vel_stamped)
         self.log = add_robot_services(bridge, robot)
         for spec, msg in robot.latched():
             bridge.publish(spec.name, msg, latch=True)
+        robot.latched_listeners.append(self._republish)
+
+    def _republish(self, publication: Publication) -> None:
+        """A latched message changed (the URDF): latch the new one for every subscriber."""
+        spec, msg = publication
+        self.bridge.publish(spec.name, msg, latch=True)
 
     def _on_cmd_vel(self, msg: Any, publisher: Session) -> None:
+        self._drive(msg, publisher, stamped=False)
+
+    def _on_cmd_vel_stamped(self, msg: Any, publisher: Session) -> None:
+        self._drive(msg, publisher, stamped=True)
+
+    def _drive(self, msg: Any, publisher: Session, stamped: bool) -> None:
         try:
-            self.robot.on_cmd_vel(msg)
+            self.robot.on_cmd_vel(msg, stamped=stamped)
         except ConfigError as error:  # the reason also goes back to the publisher
             self.log.warning(f"/cmd_vel refused: {error}")
             raise

@@ -49,13 +49,15 @@ class TopicSpec:
 CMD_VEL = TopicSpec("/cmd_vel", "geometry_msgs/msg/Twist", "in", 0, "reliable",
                     "velocity command: linear.x (m/s), angular.z (rad/s); the robot keeps the last")
 CMD_VEL_STAMPED_TYPE = "geometry_msgs/msg/TwistStamped"
-"""/cmd_vel's type when the robot takes it stamped (the node's ``cmd_vel_stamped``)."""
+"""/cmd_vel's other type: the embedded bridge takes both, each client's messages of the type
+it advertised; the rclpy node subscribes one of the two (its ``cmd_vel_stamped``)."""
 ODOM = TopicSpec("/odom", "nav_msgs/msg/Odometry", "out", 1, "reliable",
                  "wheel odometry, frame odom, child base_link")
 SCAN = TopicSpec("/scan", "sensor_msgs/msg/LaserScan", "out", 2, "sensor_data",
                  "360-beam LiDAR, frame laser")
 TF = TopicSpec("/tf", "tf2_msgs/msg/TFMessage", "out", 1, "reliable",
-               "odom -> base_link; also map -> odom with localization: perfect")
+               "odom -> base_link, then base_link -> left_wheel and right_wheel; also "
+               "map -> odom with localization: perfect")
 TF_STATIC = TopicSpec("/tf_static", "tf2_msgs/msg/TFMessage", "out", 0, "transient_local",
                       "base_link -> laser")
 GROUND_TRUTH = TopicSpec("/ground_truth", "nav_msgs/msg/Odometry", "out", 1, "reliable",
@@ -65,7 +67,15 @@ WORLD = TopicSpec("/world", "visualization_msgs/msg/MarkerArray", "out", 0, "tra
 MAP = TopicSpec("/map", "nav_msgs/msg/OccupancyGrid", "out", 0, "transient_local",
                 "the world's occupancy grid, frame map (as nav2's map_server publishes it)")
 
-ROBOT_TOPICS = (CMD_VEL, ODOM, SCAN, TF, TF_STATIC, GROUND_TRUTH, WORLD, MAP)
+JOINT_STATES = TopicSpec("/joint_states", "sensor_msgs/msg/JointState", "out",
+                         ODOM.every_ticks, "reliable",
+                         "the wheel joints: angle (rad) and speed (rad/s) from the encoders")
+ROBOT_DESCRIPTION = TopicSpec("/robot_description", "std_msgs/msg/String", "out", 0,
+                              "transient_local",
+                              "the URDF, from the robot's parameters (again when they change)")
+
+ROBOT_TOPICS = (CMD_VEL, ODOM, SCAN, TF, TF_STATIC, GROUND_TRUTH, WORLD, MAP, JOINT_STATES,
+                ROBOT_DESCRIPTION)
 """Every topic of the virtual robot, in the README's order."""
 
 PUBLISHED_TOPICS = tuple(spec for spec in ROBOT_TOPICS if spec.direction == "out")

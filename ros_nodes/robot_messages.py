@@ -141,9 +141,60 @@ def transform_stamped_msg(time_s: float, parent: str, child: str, x: float, y: f
     }
 
 
+def transform_msg(time_s: float, parent: str, child: str,
+                  translation: tuple[float, float, float],
+                  rotation: tuple[float, float, float, float]) -> Message:
+    """``geometry_msgs/TransformStamped`` of ``child`` in ``parent``.
+
+    Args:
+        time_s: stamp (s).
+        parent: the parent frame.
+        child: the child frame.
+        translation: (x, y, z) of the child's origin in the parent (m).
+        rotation: the child's orientation as a quaternion (x, y, z, w).
+    """
+    x, y, z = translation
+    qx, qy, qz, qw = rotation
+    return {
+        "header": header(time_s, parent),
+        "child_frame_id": child,
+        "transform": {"translation": vector3(x, y, z),
+                      "rotation": {"x": qx, "y": qy, "z": qz, "w": qw}},
+    }
+
+
+def axis_quaternion(axis: tuple[float, float, float],
+                    angle_rad: float) -> tuple[float, float, float, float]:
+    """The quaternion (x, y, z, w) of a turn by ``angle_rad`` about a unit ``axis``."""
+    half = angle_rad / 2.0
+    sin_half = math.sin(half)
+    return axis[0] * sin_half, axis[1] * sin_half, axis[2] * sin_half, math.cos(half)
+
+
 def tf_msg(transforms: Sequence[Message]) -> Message:
     """``tf2_msgs/TFMessage``."""
     return {"transforms": list(transforms)}
+
+
+def joint_state_msg(time_s: float, names: Sequence[str], positions: Sequence[float],
+                    velocities: Sequence[float]) -> Message:
+    """``sensor_msgs/JointState`` of joints by name: positions (rad), velocities (rad/s).
+
+    No ``header.frame_id`` (joint states have none, as joint_state_publisher sends them) and
+    no efforts.
+    """
+    return {
+        "header": header(time_s, ""),
+        "name": list(names),
+        "position": typed_sequence("float64", positions),
+        "velocity": typed_sequence("float64", velocities),
+        "effort": typed_sequence("float64", ()),
+    }
+
+
+def robot_description_msg(urdf: str) -> Message:
+    """``std_msgs/String`` holding the robot's URDF, as robot_state_publisher sends it."""
+    return {"data": urdf}
 
 
 MARKER_LINE_LIST = 5

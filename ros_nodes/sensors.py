@@ -15,18 +15,22 @@ from dataclasses import dataclass
 from physics import ConfigError, Simulation
 from physics.simulation import cast_scans
 from physics.world import LOCALIZATIONS
-from ros_nodes.robot_interface import GROUND_TRUTH, ODOM, SCAN, TF, TopicSpec
+from ros_nodes.robot_interface import GROUND_TRUTH, JOINT_STATES, ODOM, SCAN, TF, TopicSpec
 from ros_nodes.robot_messages import (
     BASE_FRAME,
     MAP_FRAME,
     ODOM_FRAME,
     ODOM_POSE_VARIANCE,
     ODOM_TWIST_VARIANCE,
+    axis_quaternion,
+    joint_state_msg,
     laser_scan_msg,
     odometry_msg,
     tf_msg,
+    transform_msg,
     transform_stamped_msg,
 )
+from ros_nodes.urdf import WHEEL_AXIS, WHEEL_JOINTS, WHEEL_LINKS, wheel_origin_m
 from rosbridge.msgs.values import Message
 
 BuildMessage = Callable[[Simulation, float], Message]
@@ -70,10 +74,33 @@ def odometry(sim: Simulation, stamp_s: float) -> Message:
 
 
 def odometry_transform(sim: Simulation, stamp_s: float) -> Message:
-    """``/tf``: odom -> base_link, the odometry's pose."""
+    """``/tf``: odom -> base_link (the odometry's pose), then the wheels in base_link."""
     odom = sim.odometry()
     return tf_msg([transform_stamped_msg(stamp_s, ODOM_FRAME, BASE_FRAME, odom.x, odom.y,
-                                         odom.theta)])
+                                         odom.theta),
+                   *wheel_transforms(sim, stamp_s)])
+
+
+def wheel_transforms(sim: Simulation, stamp_s: float) -> list[Message]:
+    """base_link -> left_wheel and right_wheel, each at its joint, turned by its angle.
+
+    What robot_state_publisher would make of ``/joint_states`` and the URDF
+    (``ros_nodes.urdf``), so viewers draw the turning wheels with no ROS install.
+    """
+    wheels = sim.wheels()
+    robot = sim.params
+    return [transform_msg(stamp_s, BASE_FRAME, link, wheel_origin_m(robot, joint),
+                          axis_quaternion(WHEEL_AXIS, angle_rad))
+            for joint, link, angle_rad in zip(WHEEL_JOINTS, WHEEL_LINKS,
+                                              (wheels.left_rad, wheels.right_rad),
+                                              strict=True)]
+
+
+def joint_states(sim: Simulation, stamp_s: float) -> Message:
+    """``/joint_states``: the wheel joints' angles and speeds, as the encoders count them."""
+    wheels = sim.wheels()
+    return joint_state_msg(stamp_s, WHEEL_JOINTS, (wheels.left_rad, wheels.right_rad),
+                           (wheels.left_rad_s, wheels.right_rad_s))
 
 
 def localized_transforms(sim: Simulation, stamp_s: float) -> Message:
@@ -85,7 +112,8 @@ def localized_transforms(sim: Simulation, stamp_s: float) -> Message:
     correction, odom = sim.map_to_odom(), sim.odometry()
     return tf_msg([
         transform_stamped_msg(stamp_s, MAP_FRAME, ODOM_FRAME, *correction),
-        transform_stamped_msg(stamp_s, ODOM_FRAME, BASE_FRAME, odom.x, odom.y, odom.theta)])
+        transform_stamped_msg(stamp_s, ODOM_FRAME, BASE_FRAME, odom.x, odom.y, odom.theta),
+        *wheel_transforms(sim, stamp_s)])
 
 
 def ground_truth(sim: Simulation, stamp_s: float) -> Message:
@@ -102,10 +130,11 @@ ODOMETRY = Sensor(ODOM, odometry)
 ODOMETRY_TF = Sensor(TF, odometry_transform)
 GROUND_TRUTH_POSE = Sensor(GROUND_TRUTH, ground_truth)
 LIDAR = Sensor(SCAN, laser_scan, sheddable=True, prepare_many=cast_scans)
+WHEEL_JOINT_STATES = Sensor(JOINT_STATES, joint_states)
 
 LOCALIZED_TF = Sensor(TF, localized_transforms)
 
-ROBOT_SENSORS = (ODOMETRY, ODOMETRY_TF, GROUND_TRUTH_POSE, LIDAR)
+ROBOT_SENSORS = (ODOMETRY, ODOMETRY_TF, GROUND_TRUTH_POSE, WHEEL_JOINT_STATES, LIDAR)
 """What the robot publishes per tick, in the order it publishes it (no localization: AMCL or
 SLAM publishes map -> odom, as on the real robot)."""
 

@@ -174,14 +174,17 @@ class NodeClock:
     """The clock of a robot the node builds itself: stamps as the node stamps them.
 
     ``stamp_s`` is simulated time (ticks since start) with ``use_sim_time``, else wall time;
-    ``monotonic_s`` is the steady clock (the node's timer runs on it).
+    ``monotonic_s`` is the same simulated time with ``use_sim_time`` (so the command
+    watchdog counts simulated seconds), else the steady clock (the node's timer runs on it).
     """
 
     def __init__(self, node: VirtualRobotNode) -> None:
         self._node = node
 
     def monotonic_s(self) -> float:
-        """``time.monotonic()`` (s)."""
+        """Simulated time with ``use_sim_time``, else ``time.monotonic()`` (s)."""
+        if self._node.uses_sim_time:
+            return self._node.stamp_time_s()
         return time.monotonic()
 
     def stamp_s(self) -> float:
@@ -261,6 +264,7 @@ class VirtualRobotNode(Node):
         self.create_service(Empty, relative(RESET_SERVICE), self._on_reset)
 
         self.robot.parameters.listeners.append(self._on_robot_parameters_changed)
+        self.robot.latched_listeners.append(self._publish_latched)
         if own_timer:
             # A steady clock: with use_sim_time the node's own clock follows /clock, which
             # this very timer publishes.
@@ -307,6 +311,11 @@ class VirtualRobotNode(Node):
                                              for name in _RUNTIME_PARAMETERS})
         for spec in RUNTIME_PARAMETERS:
             _declare(self, spec, current[spec.name])
+
+    @property
+    def uses_sim_time(self) -> bool:
+        """Whether the node runs on simulated time (``use_sim_time``)."""
+        return self._use_sim_time
 
     def stamp_time_s(self) -> float:
         """Stamps: simulated time (ticks since start) with use_sim_time, else the wall clock."""
@@ -370,13 +379,14 @@ class VirtualRobotNode(Node):
     # ---- topics and services --------------------------------------------------------------
 
     def _tick(self) -> None:
-        self._ticks += 1
+        self.robot.advance()  # at the tick's start: the watchdog reads the time it starts at
+        self._ticks += 1  # the tick's messages are stamped when it ends
         if self._clock_publisher is not None:
             time_msg = stamp(self.stamp_time_s())
             clock = ClockMsg()
             clock.clock.sec, clock.clock.nanosec = time_msg["sec"], time_msg["nanosec"]
             self._clock_publisher.publish(clock)
-        self.publish(self.robot.step())
+        self.publish(self.robot.publications())
 
     def publish(self, publications: Sequence[Publication]) -> None:
         """Publish the robot's messages (dicts) on the ROS graph; thread-safe."""
@@ -388,6 +398,11 @@ class VirtualRobotNode(Node):
         """The robot's tap: publish what it publishes (what it accepts came from a client)."""
         if direction == OUT:
             self._publish_one(topic, msg)
+
+    def _publish_latched(self, publication: Publication) -> None:
+        """A latched message changed (the URDF after a payload change): publish the new one."""
+        spec, msg = publication
+        self._publish_one(spec.name, msg)
 
     def _publish_one(self, topic: str, msg: Message) -> None:
         """Publish one robot message (a dict) on the ROS graph, if the node has its type."""
@@ -420,6 +435,8 @@ class VirtualRobotNode(Node):
             robot.parameters.listeners.remove(self._on_robot_parameters_changed)
         if robot is not None:
             robot.tap.remove(self._publish_tapped)
+            if self._publish_latched in robot.latched_listeners:
+                robot.latched_listeners.remove(self._publish_latched)
         super().destroy_node()
 
 

@@ -7,7 +7,7 @@ clock) is decided in one place; its tap (``ros_nodes.tap``) sees what crosses it
 
 from __future__ import annotations
 
-from collections.abc import Container
+from collections.abc import Callable, Container
 from typing import Any
 
 from physics import Simulation
@@ -17,6 +17,7 @@ from ros_nodes.robot_interface import (
     CMD_VEL,
     CMD_VEL_STAMPED_TYPE,
     MAP,
+    ROBOT_DESCRIPTION,
     TF_STATIC,
     WORLD,
     TopicSpec,
@@ -25,6 +26,7 @@ from ros_nodes.robot_messages import (
     BASE_FRAME,
     LASER_FRAME,
     occupancy_grid_msg,
+    robot_description_msg,
     tf_msg,
     transform_stamped_msg,
     twist_from_msg,
@@ -33,13 +35,18 @@ from ros_nodes.robot_messages import (
 )
 from ros_nodes.sensors import Sensor, robot_sensors
 from ros_nodes.tap import IN, OUT, Tap
+from ros_nodes.urdf import robot_urdf
 from rosbridge.core.clock import Clock, WallClock
 from rosbridge.msgs.values import Message
 
 Publication = tuple[TopicSpec, Message]
 
+LatchedListener = Callable[[Publication], None]
+"""Called with a latched message that changed while the robot runs (its new value)."""
+
 TIMEOUT_TOLERANCE_S = 1e-9
-"""Rounding slack of the command watchdog: a 0.5 s timeout expires after exactly 10 ticks."""
+"""Rounding slack of the command watchdog: a command 0.5 s old on ticks 50 ms apart has
+expired, whatever the last bits of 10 x 0.05 say."""
 
 
 class VirtualRobot:
@@ -67,6 +74,10 @@ class VirtualRobot:
         tap: sees every /cmd_vel the robot accepts and every message it publishes per tick
             (``ros_nodes.tap``); while a callback listens, every message is built (the rclpy
             node of ``websim serve --ros`` publishes them on the ROS graph through it).
+        latched_listeners: called with each latched message that changes while the robot
+            runs: ``/robot_description`` when a parameter that shapes the URDF (mass,
+            inertia, the speed and traction limits) is set. The bridge endpoint and the
+            rclpy node publish it again (transient local: late subscribers get the new one).
     """
 
     def __init__(self, sim: Simulation, clock: Clock | None = None,
@@ -79,10 +90,28 @@ class VirtualRobot:
         self.parameters = RobotParameters(sim)
         self.tap = Tap()
         self.clock: Clock = WallClock() if clock is None else clock
-        self._ticks_since_command = 0
+        self._command_s: float | None = None
+        """When the last command arrived (``clock.monotonic_s``); None: none yet."""
         self.collisions = 0
         """Times the robot ran into a wall (ticks where a contact began) since it started."""
         self._colliding = False
+        self.latched_listeners: list[LatchedListener] = []
+        self._urdf = self.urdf()
+        self.parameters.listeners.append(self._on_parameters_changed)
+
+    def urdf(self) -> str:
+        """The robot's URDF for the parameters in force (``ros_nodes.urdf``)."""
+        return robot_urdf(self.sim.params, self.sim.lidar.params)
+
+    def _on_parameters_changed(self, names: list[str]) -> None:
+        """Publish the URDF again when a change reshaped it (a payload, a limit)."""
+        urdf = self.urdf()
+        if urdf == self._urdf:
+            return
+        self._urdf = urdf
+        publication = (ROBOT_DESCRIPTION, robot_description_msg(urdf))
+        for listener in self.latched_listeners:
+            listener(publication)
 
     def on_cmd_vel(self, msg: Any, stamped: bool = False) -> None:
         """Apply a ``geometry_msgs/Twist`` (or ``TwistStamped``) dict as the new command.
@@ -92,7 +121,7 @@ class VirtualRobot:
         """
         linear, angular = twist_from_msg(msg, stamped=stamped)
         self.sim.command(linear, angular)
-        self._ticks_since_command = 0
+        self._command_s = self.clock.monotonic_s()
         if self.tap.attached:
             self.tap.emit(IN, CMD_VEL.name, CMD_VEL_STAMPED_TYPE if stamped else CMD_VEL.type,
                           msg, self.sim.time_s)
@@ -109,13 +138,18 @@ class VirtualRobot:
         return self.publications(wanted)
 
     def advance(self) -> None:
-        """Advance the simulation one tick (stopping a command past its timeout first)."""
+        """Advance the simulation one tick (stopping a command past its timeout first).
+
+        The watchdog (``cmd_vel_timeout_s`` > 0) measures the last command's age on the
+        robot's clock (``clock.monotonic_s``: wall time, or simulated time where the clock
+        runs on it), so the robot stops at the first tick at least the timeout after the
+        last command: within the timeout and one tick.
+        """
         timeout_s = self.parameters.cmd_vel_timeout_s
-        expired = timeout_s > 0.0 and \
-            self._ticks_since_command * self.sim.dt_s >= timeout_s - TIMEOUT_TOLERANCE_S
-        if expired and self.sim.last_command != (0.0, 0.0):
+        if timeout_s > 0.0 and self._command_s is not None and \
+                self.clock.monotonic_s() - self._command_s >= timeout_s - TIMEOUT_TOLERANCE_S:
+            self._command_s = None  # stopped: nothing left to expire
             self.sim.command(0.0, 0.0)
-        self._ticks_since_command += 1
         self.sim.step()
         collided = self.sim.state().collided
         if collided and not self._colliding:
@@ -153,10 +187,12 @@ class VirtualRobot:
         return out
 
     def latched(self) -> list[Publication]:
-        """The transient-local messages: /tf_static (base_link -> laser), /world and /map.
+        """The transient-local messages: /tf_static, /world, /map and /robot_description.
 
-        The world never changes while the robot runs (a reset keeps it), so these are sent
-        once, at start, and to every later subscriber.
+        /tf_static holds base_link -> laser. The world never changes while the robot runs (a
+        reset keeps it), so the first three are sent once, at start, and to every later
+        subscriber; /robot_description is the URDF in force (``latched_listeners`` hear when a
+        parameter change makes a new one).
         """
         now_s = self.clock.stamp_s()
         lidar = self.sim.lidar.params
@@ -164,7 +200,8 @@ class VirtualRobot:
                                       lidar.mount_y_m, lidar.mount_yaw_rad)
         return [(TF_STATIC, tf_msg([laser])),
                 (WORLD, world_markers_msg(self.sim.world, now_s)),
-                (MAP, occupancy_grid_msg(self.map, now_s))]
+                (MAP, occupancy_grid_msg(self.map, now_s)),
+                (ROBOT_DESCRIPTION, robot_description_msg(self._urdf))]
 
     def reset(self) -> None:
         """Back to spawn with odometry zeroed (``/reset_simulation``)."""

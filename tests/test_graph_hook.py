@@ -16,6 +16,7 @@ from robot_rig import robot_rig
 from physics import ConfigError, RobotParams, Simulation, load_world
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import BridgeError, Session
+from rosbridge.core.clock import ManualClock
 from rosbridge.core.outbox import Outbox
 
 TWIST = {"linear": {"x": 0.3, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
@@ -133,11 +134,13 @@ def test_a_missing_message_package_leaves_client_relay_working() -> None:
 
 
 def test_the_watchdog_stops_after_cmd_vel_timeout() -> None:
-    robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
+    clock = ManualClock()
+    robot = VirtualRobot(Simulation(load_world("empty"), seed=0), clock)
     robot.parameters.set("cmd_vel_timeout_s", 0.5)
     robot.on_cmd_vel(TWIST)
     for _ in range(40):
         robot.step()
+        clock.advance(robot.sim.dt_s)
     # 0.5 s of 0.3 m/s: exactly ten 50 ms ticks of 15 mm, then standing still.
     assert robot.sim.odometry().x == pytest.approx(0.15, abs=1e-12)
     assert robot.sim.last_command == (0.0, 0.0)

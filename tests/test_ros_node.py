@@ -187,7 +187,7 @@ def test_cmd_vel_drives_at_the_commanded_speed(graph: Graph,
 
 def test_cmd_vel_timeout_stops_after_the_timeout(graph: Graph,
                                                   start_robot: Callable[..., RobotProcess]) -> None:
-    start_robot("cmd_vel_timeout_s:=0.5")
+    start_robot("cmd_vel_timeout_s:=0.5", "use_sim_time:=true")  # the command's age in ticks
     odom = graph.collect(Odometry, "/odom", RELIABLE)
     cmd_vel = graph.node.create_publisher(Twist, "/cmd_vel", 10)
     graph.spin_until(lambda: cmd_vel.get_subscription_count() > 0, 10.0, "/cmd_vel subscriber")

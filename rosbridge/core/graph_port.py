@@ -80,8 +80,10 @@ class GraphPort:
         self._relayed_topics = relayed_topics
         self._graph: Graph | None = None
         self._subscribed: set[str] = set()
-        self._advertised: set[str] = set()
-        self._refused: set[str] = set()
+        self._advertised: dict[str, str] = {}
+        """Each topic published on the graph, and its type there (the first advertised)."""
+        self._refused: set[tuple[str, str]] = set()
+        """(topic, type) the graph refused, said once: relayed between clients only."""
 
     def attach(self, graph: Graph | None) -> None:
         """Relay to and from ``graph`` from now on (None: stop relaying)."""
@@ -124,33 +126,43 @@ class GraphPort:
             self._graph.unsubscribe(topic)
 
     def advertise(self, session: Session, topic: str, type_name: str) -> None:
-        """Publish ``topic`` on the graph too; a failure leaves client-to-client relay working."""
-        if self._graph is None or topic in self._advertised | self._refused:
+        """Publish ``topic`` on the graph too; a failure leaves client-to-client relay working.
+
+        A topic is published on the graph as one type, the first advertised; a client's
+        other type on it (a topic that carries several: the robot's /cmd_vel) stays with
+        the clients and the robot, and that client is told once.
+        """
+        if self._graph is None or (topic, type_name) in self._refused:
+            return
+        graph_type = self._advertised.get(topic)
+        if graph_type is not None:
+            if graph_type != type_name:
+                self._refused.add((topic, type_name))
+                session.report(f"{topic} is published on the ROS graph as {graph_type}; "
+                               f"{type_name} is relayed between clients only")
             return
         try:
             self._graph.advertise(topic, type_name)
         except BridgeError as error:
-            self._refused.add(topic)  # said once, not at every publish
+            self._refused.add((topic, type_name))  # said once, not at every publish
             session.report(f"{error}; {topic} is relayed between clients only")
             return
-        self._advertised.add(topic)
+        self._advertised[topic] = type_name
 
     def unadvertise(self, topic: str) -> None:
         """The last client advertisement of ``topic`` ended."""
         if self._graph is None:
             return
-        self._refused.discard(topic)
-        if topic in self._advertised:
-            self._advertised.discard(topic)
+        self._refused = {refused for refused in self._refused if refused[0] != topic}
+        if self._advertised.pop(topic, None) is not None:
             self._graph.unadvertise(topic)
 
     def publish(self, session: Session, topic: str, type_name: str, msg: Any) -> None:
         """A client published ``msg`` on ``topic``: publish it on the graph too."""
         if self._graph is None:
             return
-        if topic not in self._advertised:
-            self.advertise(session, topic, type_name)
-        if topic in self._advertised:
+        self.advertise(session, topic, type_name)
+        if self._advertised.get(topic) == type_name:
             self._graph.publish(topic, msg)
 
     # ---- services -------------------------------------------------------------------------

@@ -50,6 +50,9 @@ class Subscription:
         last_sent_s: when the last message was queued (monotonic s).
         throttle_in_force_ms: the least throttle over the ids (ms): what delivery obeys.
         queue_in_force: the longest queue over the ids.
+        type_name: the type its first subscribe named (``pkg/msg/Type``), None if none did:
+            on a topic that carries several types it gets the messages of this one (none
+            named: the topic's first type).
     """
 
     throttle_ms: dict[Any, float] = field(default_factory=dict)
@@ -59,6 +62,7 @@ class Subscription:
     last_sent_s: float = -math.inf
     throttle_in_force_ms: float = 0.0
     queue_in_force: int = 0
+    type_name: str | None = None
 
     def add(self, sub_id: Any, throttle_ms: float, queue_length: int,
             compression: str = "none") -> None:

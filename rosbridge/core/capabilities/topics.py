@@ -3,8 +3,12 @@
 The one path for every message: a client's ``publish`` and an in-process endpoint's
 (``publish``, e.g. the robot's /odom) both go through ``_deliver``, and in-process subscribers
 (``subscribe_local``, e.g. the robot's /cmd_vel) get what clients publish, as another client
-would. Every message is relayed in its canonical form (``definitions``: defaults filled,
-unknown fields refused); a type websim cannot check (not among its definitions, nor with
+would. A topic carries one type, except where an in-process subscriber takes several
+(``subscribe_local`` once per type, e.g. Twist and TwistStamped on /cmd_vel): there each
+client's messages are of the type it advertised, each in-process subscriber gets those of its
+type, and each client subscriber those of the type it named (none named: the first). Every
+message is relayed in its canonical form (``definitions``: defaults filled, unknown fields
+refused); a type websim cannot check (not among its definitions, nor with
 ``--ros`` importable) is refused at advertise, subscribe and publish, as rosbridge refuses a
 type it cannot import.
 """
@@ -95,11 +99,14 @@ class Encoded:
         msg: the message (canonical form).
         clock: what stamps its ``cbor-raw`` frame (``stamp_s``; default: wall time).
         faults: where a form that fails to be made is recorded (default: nowhere).
+        type_name: its type where the topic may carry several (a client's publish).
     """
 
     def __init__(self, topic: str, msg: Any, clock: Clock = WALL_CLOCK,
-                 faults: Faults | None = None) -> None:
+                 faults: Faults | None = None, type_name: str | None = None) -> None:
         self.topic = topic
+        self.type_name = type_name
+        """The message's type when it is a client's (``pkg/msg/Type``); None: the topic's."""
         self._clock = clock
         self._faults = faults
         self.envelope = {"op": "publish", "topic": topic, "msg": msg}
@@ -258,7 +265,8 @@ class Topics:
         self._types: dict[str, str] = {}
         self._owned: set[str] = set()
         self._subscribers: dict[str, set[Session]] = {}
-        self._local: dict[str, list[LocalSubscriber]] = {}
+        self._local: dict[str, dict[str, list[LocalSubscriber]]] = {}
+        """Each topic's in-process subscribers, by the type they take (one or several)."""
         self._latched: dict[str, _Latched] = {}
         """Each latched topic's newest latched message (rosbridge gives it to every new
         subscriber), owned by its publisher: dropped when that client leaves or
@@ -286,9 +294,15 @@ class Topics:
         self._owned.add(topic)
 
     def subscribe_local(self, topic: str, type_name: str, callback: LocalSubscriber) -> None:
-        """Give ``callback`` every message clients publish on ``topic`` (of ``type_name``)."""
-        self._types[topic] = normalize_type(type_name)
-        self._local.setdefault(topic, []).append(callback)
+        """Give ``callback`` every message clients publish on ``topic`` of ``type_name``.
+
+        Called for a second type, the topic carries both: a client may advertise either
+        (each client's messages are of the type it advertised); the first stays the topic's
+        type (what a publish without advertise, rosapi and a typeless subscribe get).
+        """
+        normalized = normalize_type(type_name)
+        self._types.setdefault(topic, normalized)
+        self._local.setdefault(topic, {}).setdefault(normalized, []).append(callback)
 
     def publish(self, topic: str, msg: Any, latch: bool = False) -> None:
         """Queue an in-process message (the robot's, the ROS graph's) for ``topic``'s clients."""
@@ -371,9 +385,20 @@ class Topics:
         except ValueError as error:
             raise BridgeError(f"{topic}: {error}") from None
         known = self._types.get(topic)
-        if known is not None and known != normalized:
-            raise BridgeError(f"{topic} carries {known}, not {normalized}")
+        if known is not None and known != normalized and normalized not in self._local_types(topic):
+            carried = " or ".join(dict.fromkeys((known, *self._local_types(topic))))
+            raise BridgeError(f"{topic} carries {carried}, not {normalized}")
         return normalized
+
+    def _local_types(self, topic: str) -> Collection[str]:
+        """The types in-process subscribers take on ``topic`` (several: it carries them all)."""
+        return self._local.get(topic, {}).keys()
+
+    def _wants(self, subscription: Subscription, topic: str, encoded: Encoded) -> bool:
+        """Whether a subscriber gets ``encoded``: on a topic of several types, only its own."""
+        if encoded.type_name is None or len(self._local_types(topic)) < 2:
+            return True
+        return (subscription.type_name or self._types.get(topic)) == encoded.type_name
 
     def _refuse_owned(self, topic: str) -> None:
         if topic in self._owned:
@@ -388,7 +413,11 @@ class Topics:
             definitions.check_type(type_name, graph=self._context.graph.attached)
         except self._context.refusals as error:
             raise BridgeError(f"advertise {topic}: {error}") from None
-        self._types[topic] = type_name
+        self._types.setdefault(topic, type_name)
+        held = session.advertised.get(topic)
+        if held and type_name not in held.values():  # rosbridge: one type per publisher
+            raise BridgeError(f"advertise {topic}: this client advertised it as "
+                              f"{next(iter(held.values()))}; unadvertise that first")
         session.advertised.setdefault(topic, {})[message.get("id")] = type_name
         if message.get("latch"):
             self._latching.add((session, topic))
@@ -444,13 +473,13 @@ class Topics:
             raise BridgeError(f"publish to {topic}: more than "
                               f"{session.limits.relay_bytes_per_s} bytes/s published; "
                               "message dropped")
-        for callback in self._local.get(topic, ()):
+        for callback in self._local.get(topic, {}).get(type_name, ()):
             try:
                 callback(msg, session)
             except self._context.refusals as error:
                 raise BridgeError(f"{topic}: {error}") from None
         self._published_s[session] = self._context.clock.monotonic_s()
-        encoded = Encoded(topic, msg, self._context.clock, self._context.faults)
+        encoded = Encoded(topic, msg, self._context.clock, self._context.faults, type_name)
         if latch:
             self._latch(topic, _Latched(encoded, session, size))
         _run(self._deliver([encoded]))
@@ -513,6 +542,8 @@ class Topics:
         """
         topic = encoded.topic
         subscription = session.subscriptions[topic]
+        if not self._wants(subscription, topic, encoded):
+            return
         throttle_ms = subscription.throttle_in_force_ms
         if throttle_ms > 0 and now - subscription.last_sent_s < \
                 throttle_ms / 1000.0 - THROTTLE_JITTER_S:
@@ -520,7 +551,7 @@ class Topics:
         subscription.last_sent_s = now
         try:
             frame = encoded.entry(subscription.compression, session.fragment_size,
-                                  self._type_of(topic), session.namespace)
+                                  encoded.type_name or self._type_of(topic), session.namespace)
         except (TypeError, ValueError) as error:  # a message no encoder can write
             if encoded.report_failure(subscription.compression):
                 self._context.faults.record(f"encoding {topic}", error)
@@ -555,6 +586,10 @@ class Topics:
         throttle_ms = float(message.get("throttle_rate", 0))  # ranges: schema.OP_FIELDS
         queue_length = int(message.get("queue_length", 0))
         subscription = session.subscriptions.get(topic)
+        if subscription is not None and named_type is not None \
+                and subscription.type_name not in (None, named_type):
+            raise BridgeError(f"subscribe {topic}: this client subscribed to it as "
+                              f"{subscription.type_name}; unsubscribe that first")
         sub_id = message.get("id")
         if subscription is not None and sub_id not in subscription.throttle_ms \
                 and len(subscription.throttle_ms) >= limits.max_ids_per_topic:
@@ -564,7 +599,7 @@ class Topics:
         if compression == "cbor-raw":
             self._check_cdr(topic)
         if subscription is None:
-            subscription = session.subscriptions[topic] = Subscription()
+            subscription = session.subscriptions[topic] = Subscription(type_name=named_type)
         subscription.add(sub_id, throttle_ms, queue_length, compression)
         if named_type is not None and topic not in self._types:
             self._subscribed_types.setdefault(topic, named_type)
@@ -573,11 +608,12 @@ class Topics:
             self._context.graph.subscribe(session, topic,
                                           message.get("type") or self._types.get(topic))
         latched = self._latched.get(topic)
-        if latched is not None:
+        if latched is not None and self._wants(subscription, topic, latched.encoded):
             _, length = subscription.effective()
             try:
                 frames = latched.encoded.entry(subscription.compression,
-                                               session.fragment_size, self._type_of(topic),
+                                               session.fragment_size,
+                                               latched.encoded.type_name or self._type_of(topic),
                                                session.namespace)
             except (TypeError, ValueError) as error:
                 raise BridgeError(f"subscribe {topic}: its latched message cannot be sent as "
