@@ -163,7 +163,8 @@ def test_perfect_localization_publishes_map_to_odom_that_composes_to_the_ground_
     odom = [f["msg"] for f in frames if f["topic"] == "/odom"]
     assert len(tf) == len(truth) == len(odom) == 400
     for message, true_pose, odometry in zip(tf, truth, odom, strict=True):
-        (to_odom, to_base) = message["transforms"]
+        (to_odom, to_base, *wheels) = message["transforms"]
+        assert [t["child_frame_id"] for t in wheels] == ["left_wheel", "right_wheel"]
         assert (to_odom["header"]["frame_id"], to_odom["child_frame_id"]) == ("map", "odom")
         assert (to_base["header"]["frame_id"], to_base["child_frame_id"]) == ("odom",
                                                                               "base_link")
@@ -182,15 +183,16 @@ def test_without_localization_tf_carries_odom_to_base_link_only() -> None:
     assert rig.robot.localization == "none" and rig.robot.sensors == ROBOT_SENSORS
     frames = received(rig, 3, ("/tf",))
     assert [[(t["header"]["frame_id"], t["child_frame_id"]) for t in f["msg"]["transforms"]]
-            for f in frames] == [[("odom", "base_link")]] * 3
+            for f in frames] == [[("odom", "base_link"), ("base_link", "left_wheel"),
+                                  ("base_link", "right_wheel")]] * 3
 
 
 def test_a_flag_overrides_the_world_either_way(noisy_world: Path) -> None:
     perfect = VirtualRobot(Simulation(load_world("maze")), localization="perfect")
     assert perfect.sensors == robot_sensors("perfect") != ROBOT_SENSORS
     topics = [[len(msg["transforms"]) for spec, msg in perfect.step() if spec.name == "/tf"]]
-    assert topics == [[2]]
+    assert topics == [[4]]  # map -> odom -> base_link, and the two wheels
     off = VirtualRobot(Simulation(load_world(noisy_world)), localization="none")
-    assert [len(msg["transforms"]) for spec, msg in off.step() if spec.name == "/tf"] == [1]
+    assert [len(msg["transforms"]) for spec, msg in off.step() if spec.name == "/tf"] == [3]
     with pytest.raises(ConfigError, match="localization: must be one of none, perfect"):
         VirtualRobot(Simulation(load_world("maze")), localization="amcl")

@@ -129,7 +129,8 @@ def test_websim_map_files_are_the_map_a_roslibpy_client_receives(tmp_path: Path)
     finally:
         assert server.stop() == 0, "".join(server.output)
     assert [(t["header"]["frame_id"], t["child_frame_id"]) for t in tf[0]["transforms"]] == \
-        [("map", "odom"), ("odom", "base_link")]
+        [("map", "odom"), ("odom", "base_link"), ("base_link", "left_wheel"),
+         ("base_link", "right_wheel")]
     assert main(["map", "corridor", "--out", str(tmp_path / "maps")]) == 0
     yaml_path = tmp_path / "maps" / "corridor.yaml"
     meta = yaml.safe_load(yaml_path.read_text(encoding="utf-8"))
