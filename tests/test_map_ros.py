@@ -85,7 +85,8 @@ def test_perfect_localization_on_the_graph_chains_onto_the_ground_truth(
     by_stamp = {(m.header.stamp.sec, m.header.stamp.nanosec): m for _, m in truth}
     matched, correction_m = 0, 0.0
     for _, message in tf:
-        to_odom, to_base = message.transforms
+        to_odom, to_base, *wheels = message.transforms
+        assert [t.child_frame_id for t in wheels] == ["left_wheel", "right_wheel"]
         assert (to_odom.header.frame_id, to_odom.child_frame_id) == ("map", "odom")
         assert (to_base.header.frame_id, to_base.child_frame_id) == ("odom", "base_link")
         true = by_stamp.get((to_odom.header.stamp.sec, to_odom.header.stamp.nanosec))
