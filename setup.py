@@ -1,7 +1,8 @@
 """The build step that makes the wheel carry what ``websim serve`` needs besides the code.
 
-Robot parameters, worlds, the command files of ``websim compare`` and the page with its
-third-party JavaScript, so an installed websim runs from any folder, offline.
+Robot parameters, worlds, the command files of ``websim compare``, the graded scenarios
+(``grading``) and the page with its third-party JavaScript, so an installed websim runs from
+any folder, offline.
 
 ``pyproject.toml`` holds the project's metadata; this file only adds that build step. The page's
 libraries (roslib, uPlot, nipplejs) are the committed npm lock's: installed with ``npm ci`` when
@@ -43,8 +44,8 @@ def vendor_libraries() -> None:
 class BuildWithShippedFiles(build_py):
     """``build_py``, then the shipped files into ``physics/_share`` and ``websim/_share``.
 
-    ``physics/_share``: the robot parameters, the worlds and the command files of
-    ``websim compare``; ``websim/_share``: the page.
+    ``physics/_share``: the robot parameters, the worlds, the command files of
+    ``websim compare`` and the scenarios of ``grading``; ``websim/_share``: the page.
     """
 
     def run(self) -> None:
@@ -54,7 +55,7 @@ class BuildWithShippedFiles(build_py):
             return
         vendor_libraries()
         build = Path(self.build_lib)
-        for folder in ("config", "worlds", "examples/commands"):
+        for folder in ("config", "worlds", "examples/commands", "examples/scenarios"):
             target = build / "physics" / "_share" / folder
             target.mkdir(parents=True, exist_ok=True)
             for source in sorted((ROOT / folder).glob("*.yaml")):

@@ -104,6 +104,9 @@ def test_the_wheel_carries_parameters_worlds_and_exactly_the_published_page(
             (PROJECT_DIR / "examples" / "commands").glob("*.yaml")} <= names
     assert {f"physics/_share/worlds/{world.name}" for world in
             (PROJECT_DIR / "worlds").glob("*.yaml")} <= names
+    assert {f"physics/_share/examples/scenarios/{scenario.name}" for scenario in
+            (PROJECT_DIR / "examples" / "scenarios").glob("*.yaml")} <= names
+    assert "grading/scenario.py" in names
     page = {name.removeprefix(WEB_SHARE) for name in names if name.startswith(WEB_SHARE)}
     assert page == set(published_files(PROJECT_DIR / "web-interface"))
     assert "node_modules/roslib/build/roslib.min.js" in page
