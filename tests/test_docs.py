@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from grading.metrics import METRICS, parameters_table
 from ros_nodes.parameters import markdown_table
 from ros_nodes.robot_description import robot_json
 from rosbridge.core import encoding, fragments, schema
@@ -30,6 +31,13 @@ README = (ROOT / "README.md").read_text(encoding="utf-8")
 def test_readme_parameter_table_is_made_from_the_parameter_specs() -> None:
     assert markdown_table() in README, "regenerate: python -c 'from ros_nodes.parameters " \
         "import markdown_table; print(markdown_table())'"
+
+
+@pytest.mark.parametrize("kind", sorted(METRICS))
+def test_grading_docs_parameter_tables_are_made_from_the_metrics(kind: str) -> None:
+    grading_doc = (ROOT / "docs" / "grading.md").read_text(encoding="utf-8")
+    assert parameters_table(kind) in grading_doc, "regenerate: python -c 'from grading." \
+        f"metrics import parameters_table; print(parameters_table(\"{kind}\"))'"
 
 
 def test_readme_limits_table_states_the_defaults_in_force() -> None:
@@ -104,7 +112,8 @@ def test_committed_robot_json_is_the_shipped_robot() -> None:
 
 
 MARKDOWN_LINK = re.compile(r"\]\(([^)\s]+)\)")
-DOCS = ("README.md", "docs/course.md", "docs/assignments.md", "examples/README.md")
+DOCS = ("README.md", "docs/course.md", "docs/assignments.md", "examples/README.md",
+        "docs/grading.md")
 
 
 def github_anchor(heading: str) -> str:
