@@ -110,6 +110,8 @@ def side_distance_m(shapes: WorldShapes, x_m: float, y_m: float, yaw_rad: float,
     heading, that line included: what a LiDAR's beams on that side can hit, at any range. A
     wall crossing the line is clipped to the part on that side.
     """
+    if side not in SIDES:
+        raise ValueError(f"side must be one of {', '.join(SIDES)}, got {side!r}")
     sign = 1.0 if side == "left" else -1.0
     centre = np.array([x_m, y_m])
     normal = sign * np.array([-math.sin(yaw_rad), math.cos(yaw_rad)])

@@ -407,6 +407,10 @@ def scenario_from_document(document: Any, *, source: str, folder: Path,
     parameters = _parameters(source, top, where_prefix)
     changes = _changes(source, top, where_prefix, duration_s, dict(parameters), base)
     end = _end(source, top, where_prefix) if "end" in top else None
+    if end is not None and math.hypot(start.x - end.x_m, start.y - end.y_m) <= end.radius_m:
+        raise fail(located(source, top, "end", where_prefix + "end"),
+                   f"the start {list(start)} is already within {end.radius_m:g} m of the end "
+                   f"point ({end.x_m:g}, {end.y_m:g}): the run would end at once")
     facts = _facts(robot, duration_s, parameters, changes, end)
     metrics = _metrics(source, top, where_prefix, dict(parameters), facts)
     return Scenario(

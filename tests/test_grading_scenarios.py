@@ -152,6 +152,9 @@ def write(tmp_path: Path, text: str, name: str = "scenario.yaml") -> Path:
     ("world: corridor\nduration_s: 5\nparameters: {side: left, desired_distance_m: 0.5}\n"
      "metrics:\n  - kind: wall_following\n",
      ":5: metrics[0]: wall_following needs the scenario's 'end'"),
+    ("world: corridor\nduration_s: 5\nparameters: {side: left, desired_distance_m: 0.5}\n"
+     "end: {point: [0.5, 0.0]}\nmetrics:\n  - kind: wall_following\n",
+     ":4: end: the start [0.0, 0.0, 0.0] is already within 1 m of the end point (0.5, 0)"),
     (HEADING.replace("    threshold: 3.0\n", "    weight: 0\n"),
      ":5: metrics: every metric has weight 0"),
     (HEADING.replace("duration_s: 5\n", ""),
