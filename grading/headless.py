@@ -1,7 +1,9 @@
 """A scenario run in this process with a Python controller: no server, no sockets, no clock.
 
 The reference the graded runs are held to, and what tests grade controllers with. The
-simulation advances one physics tick (0.05 s) at a time; every ``controller_period_ticks``
+simulation is built as ``websim serve`` builds it (the shipped robot with the scenario's
+payload, the shipped LiDAR, the shipped noise with the world's own sigmas in its place) and
+advances one physics tick (0.05 s) at a time; every ``controller_period_ticks``
 ticks, starting at t = 0, the controller is called with what the robot publishes at that
 moment (odometry, the true pose, a LiDAR scan, the parameters in force) and its command is
 applied from that tick on, as a ``/cmd_vel`` that arrives at once. Timed changes apply at the
@@ -21,6 +23,7 @@ from typing import Protocol
 
 from grading.scenario import ParameterValue, Scenario
 from grading.trajectory import Sample
+from physics.params import NoiseParams
 from physics.simulation import Simulation
 from physics.snapshots import Command, LaserScan, Odometry
 from physics.validation import ConfigError
@@ -71,7 +74,7 @@ def run_headless(scenario: Scenario,
             (the message says which, and when).
     """
     simulation = Simulation(scenario.world, scenario.robot, mode=scenario.mode,
-                            seed=scenario.seed)
+                            seed=scenario.seed, noise=scenario.world.noise_over(NoiseParams()))
     period = scenario.controller_period_ticks
     ticks = math.floor(scenario.duration_s / simulation.dt_s + 1e-9)
     pending = list(scenario.changes)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import pytest
 
@@ -150,3 +151,26 @@ def test_an_answer_that_is_not_a_command_is_refused_with_when() -> None:
     scenario = load_scenario("heading_pid")
     with pytest.raises(ConfigError, match=r"the controller's answer at t = 0.00 s: "):
         run_headless(scenario, lambda observation: ("fast", 0.0))  # type: ignore[arg-type,return-value]
+
+
+def test_a_worlds_noise_reaches_the_controller_and_the_seed_repeats_it(tmp_path: Path) -> None:
+    (tmp_path / "noisy.yaml").write_text(
+        "name: noisy\npolylines:\n  - {points: [[-3, -3], [3, -3], [3, 3], [-3, 3]], "
+        "closed: true}\nnoise: {odom_angular_sigma_rps: 0.05}\n")
+    (tmp_path / "turn.yaml").write_text(
+        "world: noisy.yaml\nduration_s: 3\nparameters: {setpoint_rad: 1.0}\n"
+        "metrics: [{kind: heading_step}]\n")
+    scenario = load_scenario(tmp_path / "turn.yaml")
+
+    def drifts() -> list[float]:
+        drift: list[float] = []
+
+        def turn(observation: Observation) -> tuple[float, float]:
+            drift.append(observation.odometry.theta - observation.ground_truth.theta)
+            return 0.0, 0.5
+        run_headless(scenario, turn)
+        return drift
+
+    first = drifts()
+    assert first[0] == 0.0 and abs(first[-1]) > 1e-3  # odometry wanders from the truth
+    assert drifts() == first  # the same seed, the same noise
