@@ -77,6 +77,7 @@ SCENARIOS_DIR = shipped("physics", "examples/scenarios")
 
 SCENARIO_KEYS = ("name", "description", "world", "start", "mode", "payload", "duration_s",
                  "seed", "controller_rate_hz", "parameters", "changes", "end", "metrics")
+REQUIRED_KEYS = ("world", "duration_s", "metrics")
 SUITE_KEYS = ("name", "description", "defaults", "scenarios")
 """``defaults`` is not read: it holds what scenarios written inline share, with a YAML anchor
 (``defaults: &defaults``) that each merges (``<<: *defaults``)."""
@@ -377,10 +378,10 @@ def scenario_from_document(document: Any, *, source: str, folder: Path,
                      document)
     check_keys(source, top, SCENARIO_KEYS,
                key_where=_keys_at(source, top, where_prefix.rstrip(".")))
-    for required in ("world", "duration_s", "metrics"):
+    for required in REQUIRED_KEYS:
         if required not in top:
             raise fail(at(top, None, required), f"missing; a scenario needs "
-                                                f"{', '.join(('world', 'duration_s', 'metrics'))}")
+                                                f"{', '.join(REQUIRED_KEYS)}")
     if default_name is None and "name" not in top:
         raise fail(at(top, None, "name"), "missing; a scenario written in a suite needs a name")
     name = _text(source, top, "name", default_name or "", where_prefix)
