@@ -32,7 +32,7 @@ from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
 from ros_nodes.robot_services import require_admin
 from ros_nodes.sensors import Sensor
 from ros_nodes.virtual_robot_core import VirtualRobot
-from rosbridge.core.clock import Clock, WallClock
+from rosbridge.core.clock import Clock, SimClock, WallClock
 from rosbridge.core.limits import ClientLimits, LatchedBytes
 from rosbridge.core.session import Session
 from rosbridge.transport.schedule import Schedule
@@ -213,9 +213,9 @@ class Classroom:
                  make_token: Callable[[str], str] | None = None, lazy: bool = False,
                  clock: Clock | None = None, state: ClassState | None = None,
                  latched: LatchedBytes | None = None) -> None:
-        self.schedule = schedule or Schedule(TICK_PERIOD_S)
         self.clock: Clock = WallClock() if clock is None else clock
         """The class's one clock (its robots' too)."""
+        self.schedule = schedule or Schedule(TICK_PERIOD_S, self.clock)
         self.open_class = open_class
         self.max_robots = max(max_robots, len(roster))
         self.state = state
@@ -344,6 +344,8 @@ class Classroom:
         groups, each group at its own offset: a robot's frames go out right after its group's
         steps instead of waiting for every other robot's, so its latency does not grow with
         the class, and the work of a tick does not arrive on the event loop all at once.
+        On sim time (``--speed``) every robot ticks at once instead: the tick's stamp is one
+        time for all, and the next tick cannot begin before the last group has run.
         """
         saver = asyncio.create_task(self._save_every(SAVE_INTERVAL_S))
         try:
@@ -365,6 +367,9 @@ class Classroom:
             return
         loop = asyncio.get_running_loop()
         now_s = self.clock.monotonic_s()
+        if isinstance(self.clock, SimClock):
+            self._tick_group(hosts, now_s, lateness_s)
+            return
         slots = min(SLOTS, len(hosts))
         slot_s = SPREAD * self.schedule.period_s / slots
         groups = [hosts[index::slots] for index in range(slots)]

@@ -7,7 +7,8 @@ the robot, or while encoding or delivering one of its messages, is recorded
 (``Faults``: logged once with the cause, counted, ``/healthz`` says ``degraded``) and the loop
 goes on; a robot whose state went non-finite is reset to its spawn pose. When the host cannot
 keep up (a tick starts half a period late), that tick's /scan is shed first; /odom and /tf
-keep their rate.
+keep their rate. Above real time (``--speed`` over 1) no tick is late (the schedule waits
+instead: ``rosbridge.transport.schedule``), so nothing is shed.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from ros_nodes.sensors import Sensor
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.access import DriveRules
 from rosbridge.core.bridge import Bridge
+from rosbridge.core.clock import speed_text
 from rosbridge.core.errors import ServiceError
 from rosbridge.core.faults import Faults
 from rosbridge.core.limits import LatchedBytes
@@ -109,8 +111,9 @@ class RobotHost:
         latched: the pool its clients' latched messages are counted in (its own, within its
             server's: ``LatchedBytes.for_robot``; default: one of the default size).
 
-    The robot's clock (``robot.clock``) is the host's: its monotonic time measures the idle
-    time, the bridge's throttles and timeouts and the last command's age.
+    The robot's clock (``robot.clock``) is the host's: its monotonic time (wall time) measures
+    the idle time, the bridge's throttles and timeouts and the last command's age; its own
+    schedule (when none is given) ticks on it, so a ``SimClock`` sets the robot's speed.
     """
 
     def __init__(self, robot: VirtualRobot, schedule: Schedule | None = None,
@@ -124,7 +127,7 @@ class RobotHost:
                              drive_rules=DRIVE_RULES, latched=latched)
         self.endpoint = RobotEndpoint(self.bridge, robot)
         self.stats = TickStats()
-        self.schedule = schedule or Schedule(TICK_PERIOD_S)
+        self.schedule = schedule or Schedule(TICK_PERIOD_S, clock)
         self.held = False
         """Paused by an admin (``/websim/pause``), whoever is connected."""
         self._idle_pause_s = idle_pause_s
@@ -285,6 +288,8 @@ class RobotHost:
             "queued_frames": sum(len(session.outbox) for session in sessions),
             "queued_bytes": sum(session.outbox.queued_bytes for session in sessions),
             "sim_time_s": round(self.robot.sim.time_s, 3),
+            "speed": speed_text(self.schedule.speed),
+            "clients_released": self.schedule.clients_released,
             "mode": self.robot.sim.mode,
             "world": self.robot.sim.world.name,
             "last_driver": self.endpoint.last_driver,

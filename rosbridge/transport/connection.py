@@ -197,13 +197,18 @@ class BridgeConnection:
         """
         outbox = self.session.outbox
         if outbox.overflowed is not None or self._closing is not None:
+            self._writers.release([outbox])  # closing: the ticks wait for it no more
             self._backed_up.set()  # the writer closes it
             return
-        if self._backed_up.is_set() or self._connection.protocol.state is not State.OPEN:
+        if self._connection.protocol.state is not State.OPEN:
+            self._writers.release([outbox])
+            return
+        if self._backed_up.is_set():
             return
         if self._encoding_wait_s() > 0 and outbox.has_deferred():
             outbox.behind = True  # its costly formats wait for its budget, in its writer
             self._backed_up.set()
+            self._writers.release([outbox])  # its own lateness: the ticks do not wait for it
             return
         transport = self._connection.transport
         room = WRITE_BUFFER_BYTES - transport.get_write_buffer_size()
@@ -234,6 +239,7 @@ class BridgeConnection:
                     while outbox.overflowed is None:
                         wait_s = self._encoding_wait_s()
                         if wait_s > 0 and outbox.has_deferred():
+                            self._writers.release([outbox])  # its lateness, not the ticks'
                             self._pacing = True
                             try:
                                 await asyncio.sleep(wait_s)  # only this client waits
@@ -252,6 +258,7 @@ class BridgeConnection:
                     return
                 outbox.behind = False
                 self._backed_up.clear()  # caught up: back to flushing after each tick
+                self._writers.caught_up()
         except ConnectionClosed:
             pass
 

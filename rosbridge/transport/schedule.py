@@ -1,7 +1,19 @@
-"""The tick schedule of one event loop: deadlines without drift, room for large work.
+"""The tick schedule of one event loop: deadlines without drift, room for large work, a pace.
 
 It also holds the loop's ``Writers``: the connections register there, and whoever runs a
 tick writes what it returns through them.
+
+Its clock sets the pace. On wall time (``WallClock``), and on a ``SimClock`` at up to real
+time, a tick is due every ``period_s / speed`` of wall time and waits for nobody: a tick that
+starts late is late (a robot sheds its /scan first) and a slow client gets the newest of each
+topic. Above real time (a ``SimClock`` at a speed over 1, or ``max``), ``period_s / speed`` is
+a pace not to exceed, not a deadline: before each tick the clients read and write, and the
+schedule waits until every client has taken the frames it was written, so a faster run drops
+nothing and no tick is ever late (nothing is shed); a host or a client that cannot keep the
+pace slows the run, never loses its messages. A client that has not taken its frames within
+``CLIENT_WAIT_S`` is released: the ticks go on without waiting for it (it gets the newest of
+each topic, as a slow client does at real time) until it has caught up, and the connection's
+stall watchdog closes it if its socket keeps taking nothing.
 """
 
 from __future__ import annotations
@@ -10,7 +22,7 @@ import asyncio
 import logging
 from collections.abc import Callable
 
-from rosbridge.core.clock import WALL_CLOCK, Clock
+from rosbridge.core.clock import WALL_CLOCK, Clock, SimClock
 from rosbridge.transport.writers import Writers
 
 log = logging.getLogger("websim.robot")
@@ -26,6 +38,18 @@ RESYNC_AFTER_S = 1.0
 """If the tick loop falls this far behind (a suspended laptop), it restarts its schedule
 instead of replaying every missed tick at once."""
 
+CATCH_UP_S = 0.05
+"""Above real time, a schedule behind its pace runs ticks back to back to make up at most this
+much wall time (a late wake-up); more is forgiven: the speed is a pace not to exceed."""
+
+CLIENT_WAIT_S = 2.0
+"""Above real time, how long a tick waits for a client to take the frames it was written
+before it releases that client (wall time, s): two seconds for a tick's few kilobytes is a
+client that stopped reading, not a slow one."""
+
+CLIENT_POLL_S = 0.01
+"""While waiting for clients, how often the schedule looks again besides when told (s)."""
+
 
 class Schedule:
     """The tick schedule of one event loop, shared by every robot on it.
@@ -34,52 +58,106 @@ class Schedule:
     that falls ``RESYNC_AFTER_S`` behind restarts its schedule instead of replaying the ticks.
     Before each tick, whatever waits for a connection is written (``Writers.sweep``: frames
     queued between ticks by something other than a client's frame, a ROS graph's answer).
+    With a ``SimClock`` the schedule moves it one period per tick, before the tick runs, and
+    paces the ticks at its speed (the module's docstring).
 
     Args:
-        period_s: tick period (s).
-        clock: what the deadlines are read on (its ``monotonic_s``; default: wall time).
+        period_s: tick period (s of sim time; of wall time at real time).
+        clock: what the deadlines are read on (its ``monotonic_s``; default: wall time);
+            a ``SimClock`` is also ticked and sets the speed.
 
     Attributes:
+        speed: times real time the ticks run (1 on wall time; ``SPEED_MAX``: back to back).
+        ahead: whether that is above real time (the ticks wait for the clients, never shed).
+        wall_period_s: wall time per tick at that speed (0 at ``max``).
         started_s: when the schedule started (the clock's monotonic s), None before.
         resyncs: times the schedule was restarted after falling far behind.
+        clients_released: times a client was released (not waited for) above real time.
+        tick_listeners: called after every tick (a class's ``/clock`` on the ROS graph).
         writers: the connections of the loop, where flushes are written.
+
+    Raises:
+        ValueError: a ``SimClock`` of another period.
     """
 
     def __init__(self, period_s: float, clock: Clock = WALL_CLOCK) -> None:
         self.period_s = period_s
         self.clock = clock
+        self._sim_clock = clock if isinstance(clock, SimClock) else None
+        if self._sim_clock is not None and self._sim_clock.period_s != period_s:
+            raise ValueError(f"a schedule of {period_s} s ticks cannot run a sim clock of "
+                             f"{self._sim_clock.period_s} s ticks")
+        self.speed = 1.0 if self._sim_clock is None else self._sim_clock.speed
+        self.ahead = self.speed > 1.0
+        self.wall_period_s = period_s / self.speed
         self.writers = Writers()
         self.started_s: float | None = None
         self.resyncs = 0
+        self.clients_released = 0
+        self.tick_listeners: list[Callable[[], None]] = []
         self._ticks = 0
         self._next_deadline_s: float | None = None
 
     async def run(self, tick: Callable[[float], None]) -> None:
-        """Call ``tick(lateness_s)`` every period, forever."""
+        """Call ``tick(lateness_s)`` every period, forever (above real time: lateness 0)."""
         clock = self.clock
         deadline = clock.monotonic_s()
         self.started_s = deadline
         while True:
-            deadline += self.period_s
+            deadline += self.wall_period_s
             self._next_deadline_s = deadline
             delay = deadline - clock.monotonic_s()
             if delay > 0:
                 await asyncio.sleep(delay)
+            elif self.ahead:
+                await asyncio.sleep(0)  # the clients read and write between ticks
+            if self.ahead:
+                await self._wait_for_clients()
             now = clock.monotonic_s()
-            if now - deadline > RESYNC_AFTER_S:
+            if self.ahead:
+                deadline = max(deadline, now - CATCH_UP_S)
+            elif now - deadline > RESYNC_AFTER_S:
                 log.warning("tick loop %.1f s behind; restarting its schedule", now - deadline)
                 self.resyncs += 1
-                self.started_s = now - self._ticks * self.period_s
+                self.started_s = now - self._ticks * self.wall_period_s
                 deadline = now
             self._ticks += 1
+            if self._sim_clock is not None:
+                self._sim_clock.tick()
             self.writers.sweep()
-            tick(max(0.0, now - deadline))
+            tick(0.0 if self.ahead else max(0.0, now - deadline))
+            for listener in self.tick_listeners:
+                try:
+                    listener()
+                except Exception:  # a listener's fault must not stop the ticks
+                    log.exception("a tick listener failed")
+
+    async def _wait_for_clients(self) -> None:
+        """Wait until every client has taken its frames; release those that take too long."""
+        writers, clock = self.writers, self.clock
+        waiting = writers.waiting()
+        if not waiting:
+            return
+        started_s = clock.monotonic_s()
+        while waiting:
+            left_s = CLIENT_WAIT_S - (clock.monotonic_s() - started_s)
+            if left_s <= 0:
+                writers.release(waiting)
+                self.clients_released += len(waiting)
+                log.warning("%d client(s) did not take one tick's frames within %g s: the "
+                            "ticks go on without waiting for them (they get the newest of "
+                            "each topic until they catch up)", len(waiting), CLIENT_WAIT_S)
+                return
+            await writers.progress(min(left_s, CLIENT_POLL_S))
+            waiting = writers.waiting()
 
     def ticks_due(self) -> int:
-        """Ticks the schedule should have run by now."""
+        """Ticks the schedule should have run by now (above real time: those it ran)."""
         if self.started_s is None:
             return 0
-        return int((self.clock.monotonic_s() - self.started_s) / self.period_s)
+        if self.ahead:
+            return self._ticks
+        return int((self.clock.monotonic_s() - self.started_s) / self.wall_period_s)
 
     async def room(self, cost_s: float) -> None:
         """Wait until ``cost_s`` of work can run before the next tick is due.

@@ -5,11 +5,16 @@ by its outbox (the instructor's view of a class holds one session per robot, all
 connection's outbox) and has it write what waits there: at once for the clients closing a
 loop, after the current callback for the others (so that everything one callback queued for
 a client goes out in one write).
+
+Above real time the schedule waits, before each tick, for the clients that have not yet taken
+what they were written (``waiting``, ``progress``), so a faster run drops nothing; a client
+it gave up on (``release``) is not waited for again until it has caught up.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from collections.abc import Callable
 
 from rosbridge.core.outbox import Outbox
@@ -23,6 +28,8 @@ class Writers:
         self._writers: dict[Outbox, Callable[[], None]] = {}
         self._later: dict[Outbox, None] = {}
         self._scheduled = False
+        self._released: set[Outbox] = set()
+        self._progress = asyncio.Event()
 
     def __len__(self) -> int:
         return len(self._writers)
@@ -35,6 +42,8 @@ class Writers:
         """Forget ``outbox``'s writer (its connection is gone)."""
         self._writers.pop(outbox, None)
         self._later.pop(outbox, None)
+        self._released.discard(outbox)
+        self._progress.set()  # a client gone is waited for no more
 
     def write(self, flush: Flush) -> None:
         """Write ``flush``: ``now`` at once, in order; ``later`` after the current callback.
@@ -52,6 +61,8 @@ class Writers:
         if self._later and not self._scheduled:
             self._scheduled = True
             asyncio.get_running_loop().call_soon(self._write_later)
+        if flush.now:
+            self._progress.set()
 
     def sweep(self) -> None:
         """Write every connection that has frames waiting, whoever queued them.
@@ -71,3 +82,37 @@ class Writers:
             write = self._writers.get(outbox)
             if write is not None:
                 write()
+        self._progress.set()
+
+    def waiting(self) -> list[Outbox]:
+        """The clients whose frames their sockets have not all taken, but the released.
+
+        A client has caught up when nothing waits in its outbox and it is not ``behind`` (its
+        connection's writer is not sending a backlog); a released client that has caught up
+        is waited for again from then on.
+        """
+        waiting = []
+        for outbox in self._writers:
+            if outbox.behind or outbox.queued_bytes > 0:
+                if outbox not in self._released:
+                    waiting.append(outbox)
+            else:
+                self._released.discard(outbox)
+        return waiting
+
+    def release(self, outboxes: list[Outbox]) -> None:
+        """Stop waiting for ``outboxes`` until each has caught up (``waiting``).
+
+        Only connections still here: one already gone is waited for no more anyway.
+        """
+        self._released.update(outbox for outbox in outboxes if outbox in self._writers)
+
+    def caught_up(self) -> None:
+        """A client's writer sent its whole backlog: whoever waits for the clients looks again."""
+        self._progress.set()
+
+    async def progress(self, timeout_s: float) -> None:
+        """Wait until a client may have caught up (or one left), at most ``timeout_s``."""
+        self._progress.clear()
+        with contextlib.suppress(asyncio.TimeoutError):  # TimeoutError only from Python 3.11
+            await asyncio.wait_for(self._progress.wait(), max(0.0, timeout_s))
