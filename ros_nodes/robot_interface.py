@@ -74,8 +74,12 @@ ROBOT_DESCRIPTION = TopicSpec("/robot_description", "std_msgs/msg/String", "out"
                               "transient_local",
                               "the URDF, from the robot's parameters (again when they change)")
 
+CLOCK = TopicSpec("/clock", "rosgraph_msgs/msg/Clock", "out", 1, "reliable",
+                  "the time of the tick, what its messages are stamped with: wall time, or sim "
+                  "time with --speed")
+
 ROBOT_TOPICS = (CMD_VEL, ODOM, SCAN, TF, TF_STATIC, GROUND_TRUTH, WORLD, MAP, JOINT_STATES,
-                ROBOT_DESCRIPTION)
+                ROBOT_DESCRIPTION, CLOCK)
 """Every topic of the virtual robot, in the README's order."""
 
 PUBLISHED_TOPICS = tuple(spec for spec in ROBOT_TOPICS if spec.direction == "out")

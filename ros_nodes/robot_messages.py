@@ -171,6 +171,11 @@ def axis_quaternion(axis: tuple[float, float, float],
     return axis[0] * sin_half, axis[1] * sin_half, axis[2] * sin_half, math.cos(half)
 
 
+def clock_msg(time_s: float) -> Message:
+    """``rosgraph_msgs/Clock``: the time of the tick (s since the epoch)."""
+    return {"clock": stamp(time_s)}
+
+
 def tf_msg(transforms: Sequence[Message]) -> Message:
     """``tf2_msgs/TFMessage``."""
     return {"transforms": list(transforms)}

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from physics import ConfigError, Simulation
 from physics.simulation import cast_scans
 from physics.world import LOCALIZATIONS
-from ros_nodes.robot_interface import GROUND_TRUTH, JOINT_STATES, ODOM, SCAN, TF, TopicSpec
+from ros_nodes.robot_interface import CLOCK, GROUND_TRUTH, JOINT_STATES, ODOM, SCAN, TF, TopicSpec
 from ros_nodes.robot_messages import (
     BASE_FRAME,
     MAP_FRAME,
@@ -23,6 +23,7 @@ from ros_nodes.robot_messages import (
     ODOM_POSE_VARIANCE,
     ODOM_TWIST_VARIANCE,
     axis_quaternion,
+    clock_msg,
     joint_state_msg,
     laser_scan_msg,
     odometry_msg,
@@ -62,6 +63,11 @@ class Sensor:
     def due(self, tick: int) -> bool:
         """Whether it publishes at ``tick`` (ticks since spawn or reset)."""
         return tick % self.topic.every_ticks == 0
+
+
+def sim_clock(sim: Simulation, stamp_s: float) -> Message:
+    """``/clock``: the tick's time, the stamp of every message of the tick."""
+    return clock_msg(stamp_s)
 
 
 def odometry(sim: Simulation, stamp_s: float) -> Message:
@@ -126,6 +132,7 @@ def laser_scan(sim: Simulation, stamp_s: float) -> Message:
     return laser_scan_msg(sim.scan(), stamp_s)
 
 
+TIME = Sensor(CLOCK, sim_clock)
 ODOMETRY = Sensor(ODOM, odometry)
 ODOMETRY_TF = Sensor(TF, odometry_transform)
 GROUND_TRUTH_POSE = Sensor(GROUND_TRUTH, ground_truth)
@@ -134,8 +141,9 @@ WHEEL_JOINT_STATES = Sensor(JOINT_STATES, joint_states)
 
 LOCALIZED_TF = Sensor(TF, localized_transforms)
 
-ROBOT_SENSORS = (ODOMETRY, ODOMETRY_TF, GROUND_TRUTH_POSE, WHEEL_JOINT_STATES, LIDAR)
-"""What the robot publishes per tick, in the order it publishes it (no localization: AMCL or
+ROBOT_SENSORS = (TIME, ODOMETRY, ODOMETRY_TF, GROUND_TRUTH_POSE, WHEEL_JOINT_STATES, LIDAR)
+"""What the robot publishes per tick, in the order it publishes it (the time first, as a
+simulator publishes ``/clock`` before the messages stamped with it; no localization: AMCL or
 SLAM publishes map -> odom, as on the real robot)."""
 
 

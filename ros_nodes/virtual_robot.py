@@ -14,16 +14,17 @@ by the server (see ``rosbridge.graph.relay``).
 Parameters (``ros2 param describe /virtual_robot NAME`` shows each): ``mode``, ``mass_kg``,
 ``inertia_kg_m2``, ``max_linear_mps``, ``max_angular_rps``, ``max_wheel_force_n`` and
 ``cmd_vel_timeout_s`` change at runtime; ``world``, ``params_file``, ``seed``, the noise
-sigmas, ``localization`` and ``cmd_vel_stamped`` are read at start (read-only afterwards).
-``use_sim_time:=true`` makes the node publish ``/clock`` (simulated time, which keeps counting
-across resets) and stamp with it. Bad values are refused with the reason; nothing changes.
+sigmas, ``localization`` and ``cmd_vel_stamped`` are read at start (read-only afterwards). The
+node publishes ``/clock`` every tick, the stamp of the tick's messages: wall time, or with
+``use_sim_time:=true`` sim time (``rosbridge.core.clock.SimClock``: from the wall time of the
+start, exactly one tick per tick, counting on across resets), which the node's own rclpy
+clock then follows too. Bad values are refused with the reason; nothing changes.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import sys
-import time
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol, TypeVar
 
@@ -48,13 +49,12 @@ try:
         ReliabilityPolicy,
         qos_profile_sensor_data,
     )
-    from rosgraph_msgs.msg import Clock as ClockMsg
     from std_srvs.srv import Empty
 except ImportError as error:  # pragma: no cover - depends on the installation
     raise ImportError(f"{error}: the virtual_robot node needs rclpy and the ROS message "
                       "packages (pip install '.[ros]')") from error
 
-from physics import ConfigError, NoiseParams, Simulation, load_params, load_world
+from physics import TICK_PERIOD_S, ConfigError, NoiseParams, Simulation, load_params, load_world
 from physics.params import SHIPPED_PARAMS_FILE
 from ros_nodes.node_parameters import add_parameter_callbacks
 from ros_nodes.parameters import (
@@ -67,6 +67,7 @@ from ros_nodes.parameters import (
     parameter_spec,
 )
 from ros_nodes.robot_interface import (
+    CLOCK,
     CMD_VEL,
     CMD_VEL_STAMPED_TYPE,
     NODE_BASENAME,
@@ -77,6 +78,7 @@ from ros_nodes.robot_interface import (
 from ros_nodes.robot_messages import prefixed_frames
 from ros_nodes.tap import OUT
 from ros_nodes.virtual_robot_core import Publication, VirtualRobot
+from rosbridge.core.clock import SimClock, WallClock
 from rosbridge.msgs.rclpy_conversion import (
     MessageConversionError,
     PublisherFilter,
@@ -84,7 +86,7 @@ from rosbridge.msgs.rclpy_conversion import (
     to_dict,
     to_message,
 )
-from rosbridge.msgs.values import Message, stamp
+from rosbridge.msgs.values import Message
 
 TF_MISSING_WARNING = (
     "tf2_msgs is not installed, so /tf and /tf_static are not published: it is not on PyPI. "
@@ -170,28 +172,6 @@ _DOUBLE_PARAMETERS = {spec.name for spec in PARAMETERS if spec.type_code == PARA
 _SPECS = {spec.name: spec for spec in PARAMETERS}
 
 
-class NodeClock:
-    """The clock of a robot the node builds itself: stamps as the node stamps them.
-
-    ``stamp_s`` is simulated time (ticks since start) with ``use_sim_time``, else wall time;
-    ``monotonic_s`` is the same simulated time with ``use_sim_time`` (so the command
-    watchdog counts simulated seconds), else the steady clock (the node's timer runs on it).
-    """
-
-    def __init__(self, node: VirtualRobotNode) -> None:
-        self._node = node
-
-    def monotonic_s(self) -> float:
-        """Simulated time with ``use_sim_time``, else ``time.monotonic()`` (s)."""
-        if self._node.uses_sim_time:
-            return self._node.stamp_time_s()
-        return time.monotonic()
-
-    def stamp_s(self) -> float:
-        """The node's stamp time (s): simulated with ``use_sim_time``, else the epoch's."""
-        return self._node.stamp_time_s()
-
-
 class VirtualRobotNode(Node):
     """The simulated robot as a ROS 2 node.
 
@@ -209,6 +189,8 @@ class VirtualRobotNode(Node):
             ``alice/odom``, ``alice/base_link``: the multi-robot convention); the robot's
             topics and services are relative names, so ``namespace="/alice"`` in
             ``node_kwargs`` puts them under ``/alice``.
+        publish_clock: publish the robot's ``/clock`` (always absolute: what ``use_sim_time``
+            nodes read); False for a class's robots, whose one ``/clock`` the class publishes.
         **node_kwargs: passed to ``rclpy.node.Node`` (e.g. ``context``).
 
     Raises:
@@ -217,11 +199,11 @@ class VirtualRobotNode(Node):
 
     def __init__(self, robot: VirtualRobot | None = None, *, access: RobotAccess | None = None,
                  own_timer: bool = True, ignore_cmd_vel_from: str | None = None,
-                 frame_prefix: str = "", **node_kwargs: Any) -> None:
+                 frame_prefix: str = "", publish_clock: bool = True,
+                 **node_kwargs: Any) -> None:
         super().__init__(NODE_BASENAME, **node_kwargs)
         self._frame_prefix = frame_prefix
         self._access: RobotAccess = access or DirectAccess()
-        self._ticks = 0
         self._robot: VirtualRobot | None = None
         add_parameter_callbacks(self, _DOUBLE_PARAMETERS, self._validate_parameters,
                                 self._apply_parameters)
@@ -235,6 +217,8 @@ class VirtualRobotNode(Node):
         self._robot_publishers: dict[str, Any] = {}
         self._classes: dict[str, Any] = {}
         for spec in PUBLISHED_TOPICS:
+            if spec is CLOCK and not publish_clock:
+                continue
             try:
                 cls = message_class(spec.type)
             except MessageConversionError:
@@ -243,11 +227,9 @@ class VirtualRobotNode(Node):
                 raise
             self._classes[spec.name] = cls
             self._robot_publishers[spec.name] = self.create_publisher(
-                cls, relative(spec.name), qos_profile(spec))
+                cls, spec.name if spec is CLOCK else relative(spec.name), qos_profile(spec))
         if not any(name in self._robot_publishers for name in ("/tf", "/tf_static")):
             self.get_logger().warning(TF_MISSING_WARNING)
-        self._clock_publisher = (self.create_publisher(ClockMsg, "/clock", 10)
-                                 if self._use_sim_time else None)
 
         cmd_vel_type = CMD_VEL_STAMPED_TYPE if self._cmd_vel_stamped else CMD_VEL.type
         callback: Callable[..., None] = self._on_cmd_vel
@@ -265,6 +247,9 @@ class VirtualRobotNode(Node):
 
         self.robot.parameters.listeners.append(self._on_robot_parameters_changed)
         self.robot.latched_listeners.append(self._publish_latched)
+        self._sim_clock = self.robot.clock if own_timer and \
+            isinstance(self.robot.clock, SimClock) else None
+        """The sim clock this node's timer moves (its robot's, when the node ticks it)."""
         if own_timer:
             # A steady clock: with use_sim_time the node's own clock follows /clock, which
             # this very timer publishes.
@@ -276,7 +261,7 @@ class VirtualRobotNode(Node):
         sim = self.robot.sim
         self.get_logger().info(
             f"world '{sim.world.name}', {sim.mode} mode; /cmd_vel as {cmd_vel_type}"
-            f"{', publishing /clock' if self._use_sim_time else ''}")
+            f"{'; sim time' if self._use_sim_time else ''}")
 
     # ---- construction ---------------------------------------------------------------------
 
@@ -293,7 +278,8 @@ class VirtualRobotNode(Node):
             spec.name: float(_declare(self, spec, float(getattr(defaults, spec.name))))
             for spec in _NOISE_PARAMETERS})
         sim = Simulation(world, platform.robot, seed=seed, lidar=platform.lidar, noise=noise)
-        return VirtualRobot(sim, clock=NodeClock(self),
+        clock = SimClock(TICK_PERIOD_S) if self._use_sim_time else WallClock()
+        return VirtualRobot(sim, clock=clock,
                             localization=None if localization == WORLD_LOCALIZATION
                             else localization)
 
@@ -311,15 +297,6 @@ class VirtualRobotNode(Node):
                                              for name in _RUNTIME_PARAMETERS})
         for spec in RUNTIME_PARAMETERS:
             _declare(self, spec, current[spec.name])
-
-    @property
-    def uses_sim_time(self) -> bool:
-        """Whether the node runs on simulated time (``use_sim_time``)."""
-        return self._use_sim_time
-
-    def stamp_time_s(self) -> float:
-        """Stamps: simulated time (ticks since start) with use_sim_time, else the wall clock."""
-        return self._ticks * self.robot.sim.dt_s if self._use_sim_time else time.time()
 
     # ---- parameters -----------------------------------------------------------------------
 
@@ -379,14 +356,9 @@ class VirtualRobotNode(Node):
     # ---- topics and services --------------------------------------------------------------
 
     def _tick(self) -> None:
-        self.robot.advance()  # at the tick's start: the watchdog reads the time it starts at
-        self._ticks += 1  # the tick's messages are stamped when it ends
-        if self._clock_publisher is not None:
-            time_msg = stamp(self.stamp_time_s())
-            clock = ClockMsg()
-            clock.clock.sec, clock.clock.nanosec = time_msg["sec"], time_msg["nanosec"]
-            self._clock_publisher.publish(clock)
-        self.publish(self.robot.publications())
+        if self._sim_clock is not None:
+            self._sim_clock.tick()
+        self.publish(self.robot.step())
 
     def publish(self, publications: Sequence[Publication]) -> None:
         """Publish the robot's messages (dicts) on the ROS graph; thread-safe."""

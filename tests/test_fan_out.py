@@ -236,7 +236,7 @@ def test_only_the_messages_someone_subscribes_to_are_built() -> None:
     heard: list[list[str]] = [[]]
     robot.tap.add(lambda direction, topic, *_: heard[-1].append(topic))
     robot.step(wanted={"/odom"})  # a tap (the ROS node) gets everything
-    assert heard == [["/odom", "/tf", "/ground_truth", "/joint_states"]]
+    assert heard == [["/clock", "/odom", "/tf", "/ground_truth", "/joint_states"]]
 
 
 def test_a_throttle_counts_from_when_ticks_were_due_so_late_ticks_lose_nothing() -> None:

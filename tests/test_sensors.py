@@ -8,7 +8,7 @@ from robot_rig import robot_rig
 from physics import NoiseParams, Pose2D, Simulation, load_world
 from physics.lidar import ScanRequest, scan_many
 from ros_nodes.robot_host import SHED_SCANS_AFTER_S
-from ros_nodes.robot_interface import GROUND_TRUTH, JOINT_STATES, ODOM, SCAN, TF, TopicSpec
+from ros_nodes.robot_interface import CLOCK, GROUND_TRUTH, JOINT_STATES, ODOM, SCAN, TF, TopicSpec
 from ros_nodes.sensors import ROBOT_SENSORS, Sensor
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.msgs.values import Message
@@ -21,13 +21,13 @@ def battery(sim: Simulation, stamp_s: float) -> Message:
 
 
 def test_the_robot_publishes_its_sensors_in_order_each_at_its_rate() -> None:
-    assert [sensor.topic for sensor in ROBOT_SENSORS] == [ODOM, TF, GROUND_TRUTH, JOINT_STATES,
-                                                           SCAN]
+    assert [sensor.topic for sensor in ROBOT_SENSORS] == [CLOCK, ODOM, TF, GROUND_TRUTH,
+                                                           JOINT_STATES, SCAN]
     assert [sensor.topic.name for sensor in ROBOT_SENSORS if sensor.sheddable] == ["/scan"]
     robot = VirtualRobot(Simulation(load_world("empty"), seed=0))
     topics = [[spec.name for spec, _ in robot.step()] for _ in range(4)]
-    assert topics == [["/odom", "/tf", "/ground_truth", "/joint_states"],
-                      ["/odom", "/tf", "/ground_truth", "/joint_states", "/scan"]] * 2
+    assert topics == [["/clock", "/odom", "/tf", "/ground_truth", "/joint_states"],
+                      ["/clock", "/odom", "/tf", "/ground_truth", "/joint_states", "/scan"]] * 2
 
 
 def test_a_new_sensor_is_one_more_sensor() -> None:

@@ -34,20 +34,22 @@ def test_the_tap_sees_commands_in_and_messages_out_with_their_sim_time() -> None
     robot.on_cmd_vel(TWIST)
     published = robot.step()
     assert [(direction, topic, type_name) for direction, topic, type_name, *_ in heard] == [
+        (OUT, "/clock", "rosgraph_msgs/msg/Clock"),
         (OUT, "/odom", "nav_msgs/msg/Odometry"),
         (OUT, "/tf", "tf2_msgs/msg/TFMessage"),
         (OUT, "/ground_truth", "nav_msgs/msg/Odometry"),
         (OUT, "/joint_states", "sensor_msgs/msg/JointState"),
         (IN, "/cmd_vel", "geometry_msgs/msg/Twist"),
+        (OUT, "/clock", "rosgraph_msgs/msg/Clock"),
         (OUT, "/odom", "nav_msgs/msg/Odometry"),
         (OUT, "/tf", "tf2_msgs/msg/TFMessage"),
         (OUT, "/ground_truth", "nav_msgs/msg/Odometry"),
         (OUT, "/joint_states", "sensor_msgs/msg/JointState"),
         (OUT, "/scan", "sensor_msgs/msg/LaserScan"),
     ]
-    assert [time_s for *_, time_s in heard] == pytest.approx([0.05] * 5 + [0.1] * 5)
-    assert heard[4][3] is TWIST
-    assert [msg for direction, _, _, msg, _ in heard[5:]] == [msg for _, msg in published]
+    assert [time_s for *_, time_s in heard] == pytest.approx([0.05] * 6 + [0.1] * 6)
+    assert heard[5][3] is TWIST
+    assert [msg for direction, _, _, msg, _ in heard[6:]] == [msg for _, msg in published]
 
 
 def test_a_stamped_command_is_tapped_with_its_type_and_a_refused_one_not_at_all() -> None:
@@ -70,7 +72,8 @@ def test_the_tap_sees_what_a_client_sends_through_the_bridge_and_all_the_robot_b
     host.tick()
     host.tick()  # nobody subscribes, yet the tap gets every message, /scan included
     topics: list[Any] = [(direction, topic) for direction, topic, *_ in heard]
-    per_tick = [(OUT, "/odom"), (OUT, "/tf"), (OUT, "/ground_truth"), (OUT, "/joint_states")]
+    per_tick = [(OUT, "/clock"), (OUT, "/odom"), (OUT, "/tf"), (OUT, "/ground_truth"),
+                (OUT, "/joint_states")]
     assert topics == [(IN, "/cmd_vel"), *per_tick, *per_tick, (OUT, "/scan")]
     assert host.stats.scans_cast == 1
 
@@ -87,5 +90,5 @@ def test_a_removed_callback_hears_nothing_more() -> None:
     robot.tap.remove(callback)
     robot.tap.remove(callback)  # twice: nothing
     robot.step()
-    assert heard == ["/odom", "/tf", "/ground_truth", "/joint_states"]
+    assert heard == ["/clock", "/odom", "/tf", "/ground_truth", "/joint_states"]
     assert callback not in robot.tap and not robot.tap.attached

@@ -4,17 +4,27 @@ from __future__ import annotations
 
 import argparse
 import importlib.metadata
+import math
 import sys
+import time
 from collections.abc import Sequence
 
 from classroom import nginx_config
 from classroom.registry import Student, strong_token, weak_token
-from physics import MODES, ConfigError, Simulation, load_params, load_world
+from physics import MODES, TICK_PERIOD_S, ConfigError, Simulation, load_params, load_world
 from physics.params import SHIPPED_PARAMS_FILE
 from physics.world import WORLDS_DIR
 from ros_nodes.robot_description import robot_json
 from ros_nodes.virtual_robot_core import VirtualRobot
-from rosbridge.core.clock import WallClock
+from rosbridge.core.clock import (
+    MAX_SPEED,
+    MIN_SPEED,
+    SPEED_MAX,
+    WALL_CLOCK,
+    Clock,
+    SimClock,
+    WallClock,
+)
 from websim import compare_command, map_command, sites
 from websim import serve as serve_command
 
@@ -40,6 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
         "demo", help="drive the robot headless and print odometry (no server)",
         description="Drive a circle headless, faster than real time, printing odometry.")
     _add_sim_arguments(demo)
+    demo.add_argument("--speed", type=parse_speed, default=SPEED_MAX, metavar="X|max",
+                      help=f"times real time ({MIN_SPEED:g} to {MAX_SPEED:g}), or max: as fast "
+                           "as the host allows (default max)")
     demo.add_argument("--seconds", type=float, default=5.0, help="simulated time (default 5)")
     demo.add_argument("--linear", type=float, default=0.3, help="linear.x in m/s (default 0.3)")
     demo.add_argument("--angular", type=float, default=0.5,
@@ -51,6 +64,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run the simulator in real time, speak the rosbridge v2 protocol on the "
                     "WebSocket port and serve the web interface on the HTTP port.")
     _add_sim_arguments(serve)
+    serve.add_argument("--speed", type=parse_speed, default=None, metavar="X|max",
+                       help="run on sim time at X times real time "
+                            f"({MIN_SPEED:g} to {MAX_SPEED:g}), or max: as fast as the host "
+                            "and the clients allow; stamps and /clock are then sim time, "
+                            "starting at the wall time of the start (default: real time, "
+                            "stamped with the wall clock)")
     serve_command.add_arguments(serve)
     serve.set_defaults(run=_run_serve)
 
@@ -113,17 +132,49 @@ def make_simulation(args: argparse.Namespace) -> Simulation:
                       lidar=platform.lidar, noise=world.noise_over(platform.noise))
 
 
+def parse_speed(text: str) -> float:
+    """``--speed``, an argparse type: times real time, or ``max`` (``SPEED_MAX``).
+
+    A finite number from ``MIN_SPEED`` to ``MAX_SPEED``, or ``max``: as fast as the host
+    allows; anything else (0, negative, nan, inf, a word, 1e9) is refused with the range.
+    """
+    allowed = f"a number of times real time from {MIN_SPEED:g} to {MAX_SPEED:g}, or 'max'"
+    if text.strip().lower() == "max":
+        return SPEED_MAX
+    try:
+        speed = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {allowed}, got '{text}'") from None
+    if not math.isfinite(speed):
+        raise argparse.ArgumentTypeError(f"expected {allowed}, got '{text}' (as fast as the "
+                                         "host allows is 'max')")
+    if not MIN_SPEED <= speed <= MAX_SPEED:
+        hint = " (as fast as the host allows is 'max')" if speed > MAX_SPEED else ""
+        raise argparse.ArgumentTypeError(f"expected {allowed}, got '{text}'{hint}")
+    return speed
+
+
+def make_clock(speed: float | None) -> Clock:
+    """The server's one clock: wall time (no ``--speed``), else sim time at ``speed``."""
+    return WallClock() if speed is None else SimClock(TICK_PERIOD_S, speed)
+
+
 def _run_demo(args: argparse.Namespace) -> int:
     sim = make_simulation(args)
     sim.command(args.linear, args.angular)
-    print("t_s     odom_x_m  odom_y_m  odom_theta_rad  v_mps   omega_rps")
+    print("t_s     odom_x_m  odom_y_m  odom_theta_rad  v_mps   omega_rps", flush=True)
     ticks_per_print = max(1, round(0.5 / sim.dt_s))
-    for _ in range(max(1, round(args.seconds / sim.dt_s))):
+    wall_period_s = sim.dt_s / args.speed  # 0 at max: no waiting
+    started_s = WALL_CLOCK.monotonic_s()
+    for tick in range(max(1, round(args.seconds / sim.dt_s))):
+        delay_s = started_s + tick * wall_period_s - WALL_CLOCK.monotonic_s()
+        if delay_s > 0:
+            time.sleep(delay_s)
         sim.step()
         if sim.tick % ticks_per_print == 0:
             odom = sim.odometry()
             print(f"{sim.time_s:6.2f}  {odom.x:8.4f}  {odom.y:8.4f}  {odom.theta:14.4f}  "
-                  f"{odom.v:6.3f}  {odom.omega:9.3f}")
+                  f"{odom.v:6.3f}  {odom.omega:9.3f}", flush=True)
     return 0
 
 
@@ -145,7 +196,7 @@ def _run_serve(args: argparse.Namespace) -> int:
                           "--public-ws-port (the proxy's ports): with one, the links would mix "
                           "this process's port with the proxy's")
     limits, origins = serve_command.limits_from(args), serve_command.origins_from(args)
-    clock = WallClock()  # the one clock of the server: every robot's, the class's
+    clock = make_clock(args.speed)  # the one clock of the server: every robot's, the class's
     if args.class_spec is None:
         robot = VirtualRobot(make_simulation(args), clock, localization=args.localization)
         site = sites.single_robot(robot, token, limits, origins,

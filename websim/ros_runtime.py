@@ -26,14 +26,18 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from ros_nodes.virtual_robot import VirtualRobotNode
+from ros_nodes.robot_interface import CLOCK
+from ros_nodes.robot_messages import clock_msg
+from ros_nodes.virtual_robot import VirtualRobotNode, qos_profile
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge
 from rosbridge.graph.actions import RosActions
 from rosbridge.graph.names import RELAY_NODE_NAME
 from rosbridge.graph.relay import GraphRelay, LoopAccess
 from rosbridge.graph.services import GraphServices
+from rosbridge.msgs.rclpy_conversion import message_class, to_message
 from rosbridge.msgs.values import Message
+from rosbridge.transport.schedule import Schedule
 from rosbridge.transport.writers import Writers
 
 
@@ -126,6 +130,10 @@ class RosRuntime:
         self._thread.join(timeout_s)
 
 
+CLOCK_NODE_NAME = "websim_clock"
+"""The node that publishes a class's one ``/clock`` on the ROS graph."""
+
+
 class ClassRosRuntime:
     """rclpy inside ``websim serve --class --ros``: a ``virtual_robot`` node per robot.
 
@@ -136,34 +144,50 @@ class ClassRosRuntime:
     browsers' rosbridge topics are not relayed to the graph in a class (each robot's page
     talks to its bridge; the graph talks to its node).
 
+    The class has one clock, so one ``/clock`` (at the root, what ``use_sim_time`` nodes
+    read): published after every tick of the class's schedule by the node
+    ``/CLOCK_NODE_NAME``, not by each robot's node.
+
     Args:
         robots: (name, robot) of every robot of the class.
         loop: the server's event loop.
+        schedule: the class's tick schedule (its clock is the class's).
     """
 
     def __init__(self, robots: list[tuple[str, VirtualRobot]],
-                 loop: asyncio.AbstractEventLoop) -> None:
+                 loop: asyncio.AbstractEventLoop, schedule: Schedule) -> None:
         self.context = Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.nodes: list[VirtualRobotNode] = []
+        self._schedule = schedule
         try:
             for name, robot in robots:
                 self.nodes.append(VirtualRobotNode(
                     robot, access=LoopAccess(loop), own_timer=False, frame_prefix=f"{name}/",
-                    namespace=f"/{name}", context=self.context))
+                    publish_clock=False, namespace=f"/{name}", context=self.context))
+            self.clock_node = Node(CLOCK_NODE_NAME, context=self.context)
         except BaseException:
             for node in self.nodes:
                 node.destroy_node()
             self.context.try_shutdown()
             raise
+        clock_type = message_class(CLOCK.type)
+        publisher = self.clock_node.create_publisher(clock_type, CLOCK.name, qos_profile(CLOCK))
+        clock = schedule.clock
+
+        def publish_clock() -> None:
+            publisher.publish(to_message(clock_type, clock_msg(clock.stamp_s())))
+
+        self._publish_clock = publish_clock
         self.executor = SingleThreadedExecutor(context=self.context)
         for node in self.nodes:
             self.executor.add_node(node)
         self._thread = threading.Thread(target=self._spin, name="rclpy-executor", daemon=True)
 
     def start(self) -> None:
-        """Spin the executor."""
+        """Spin the executor; publish ``/clock`` after every tick from now on."""
         self._thread.start()
+        self._schedule.tick_listeners.append(self._publish_clock)
 
     def poll(self) -> None:
         """Nothing waits for graph topics here (no relay in a class)."""
@@ -172,9 +196,12 @@ class ClassRosRuntime:
         spin_until_shutdown(self.executor, self.context)
 
     def stop(self, timeout_s: float = 5.0) -> None:
-        """Stop the executor and destroy the nodes."""
+        """Stop publishing ``/clock``, stop the executor and destroy the nodes."""
+        if self._publish_clock in self._schedule.tick_listeners:
+            self._schedule.tick_listeners.remove(self._publish_clock)
         self.executor.shutdown(timeout_sec=timeout_s)
         for node in self.nodes:
             node.destroy_node()
+        self.clock_node.destroy_node()
         self.context.try_shutdown()
         self._thread.join(timeout_s)

@@ -24,11 +24,12 @@ from typing import Protocol
 from classroom.class_server import ClassServer
 from classroom.nginx_config import parse_worker, worker_for, worker_ring
 from classroom.registry import DEFAULT_IDLE_PAUSE_S, DEFAULT_MAX_ROBOTS
-from physics import ConfigError
+from physics import TICK_PERIOD_S, ConfigError
 from physics.shipped import shipped
 from physics.world import LOCALIZATIONS
 from ros_nodes.robot_interface import NODE_NAME
 from ros_nodes.robot_server import SimServer
+from rosbridge.core.clock import SPEED_MAX
 from rosbridge.core.limits import ClientLimits, OriginPolicy, TrustedProxies
 from rosbridge.core.schema import NAME_TOKEN
 from rosbridge.graph.names import RELAY_NODE_NAME
@@ -288,6 +289,12 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
         if args.public_http_port or args.public_ws_port:
             print(f"  (this process listens on {args.http_port} and {args.ws_port}; the "
                   "addresses above are the proxy's)", flush=True)
+    speed = getattr(args, "speed", None)
+    if speed is not None:
+        pace = ("as fast as the host and the clients allow" if speed == SPEED_MAX
+                else f"{speed:g}x real time")
+        print(f"  clock:     sim time, {pace}: /clock and every stamp start at the wall time "
+              f"of the start and move {TICK_PERIOD_S * 1000:g} ms per tick", flush=True)
     for line in site.banner:
         print(f"  {line}", flush=True)
     if ros is not None:
@@ -391,13 +398,16 @@ def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
     if site.robot is not None and isinstance(site.front, SimServer):
         runtime = RosRuntime(site.robot, site.front.bridge, loop,
                              site.front.host.schedule.writers)
-    else:
+    elif site.classroom is not None:
         hosts = site.class_hosts()
         unnamable = [name for name, _ in hosts if not NAME_TOKEN.fullmatch(name)]
         if unnamable:
             raise RuntimeError(f"--ros: robot names must also be ROS namespaces (a letter or _ "
                                f"first, no -): {', '.join(unnamable[:5])}")
-        runtime = ClassRosRuntime([(name, host.robot) for name, host in hosts], loop)
+        runtime = ClassRosRuntime([(name, host.robot) for name, host in hosts], loop,
+                                  site.classroom.schedule)
+    else:
+        raise RuntimeError("--ros: this site has neither a robot nor a class")
     runtime.start()
     return runtime
 
