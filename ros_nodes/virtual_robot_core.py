@@ -36,7 +36,7 @@ from ros_nodes.robot_messages import (
 from ros_nodes.sensors import Sensor, robot_sensors
 from ros_nodes.tap import IN, OUT, Tap
 from ros_nodes.urdf import robot_urdf
-from rosbridge.core.clock import Clock, WallClock
+from rosbridge.core.clock import Clock, SimClock, WallClock
 from rosbridge.msgs.values import Message
 
 Publication = tuple[TopicSpec, Message]
@@ -91,7 +91,7 @@ class VirtualRobot:
         self.tap = Tap()
         self.clock: Clock = WallClock() if clock is None else clock
         self._command_s: float | None = None
-        """When the last command arrived (``clock.monotonic_s``); None: none yet."""
+        """When the last command arrived (``watchdog_s``); None: none yet."""
         self.collisions = 0
         """Times the robot ran into a wall (ticks where a contact began) since it started."""
         self._colliding = False
@@ -121,7 +121,7 @@ class VirtualRobot:
         """
         linear, angular = twist_from_msg(msg, stamped=stamped)
         self.sim.command(linear, angular)
-        self._command_s = self.clock.monotonic_s()
+        self._command_s = self.watchdog_s()
         if self.tap.attached:
             self.tap.emit(IN, CMD_VEL.name, CMD_VEL_STAMPED_TYPE if stamped else CMD_VEL.type,
                           msg, self.sim.time_s)
@@ -137,17 +137,29 @@ class VirtualRobot:
         self.advance()
         return self.publications(wanted)
 
+    def watchdog_s(self) -> float:
+        """The time the ``/cmd_vel`` watchdog reads (s).
+
+        On sim time (a ``SimClock``: ``--speed``, a ``use_sim_time`` node) the robot's own:
+        its simulation's time, which the tick about to step starts at, so a 0.5 s timeout
+        is ten ticks of motion at any speed. Otherwise the clock's monotonic time (wall
+        time, as a motor driver's timeout runs).
+        """
+        if isinstance(self.clock, SimClock):
+            return self.sim.time_s
+        return self.clock.monotonic_s()
+
     def advance(self) -> None:
         """Advance the simulation one tick (stopping a command past its timeout first).
 
         The watchdog (``cmd_vel_timeout_s`` > 0) measures the last command's age on the
-        robot's clock (``clock.monotonic_s``: wall time, or simulated time where the clock
+        robot's clock (``watchdog_s``: wall time, or simulated time where the clock
         runs on it), so the robot stops at the first tick at least the timeout after the
         last command: within the timeout and one tick.
         """
         timeout_s = self.parameters.cmd_vel_timeout_s
         if timeout_s > 0.0 and self._command_s is not None and \
-                self.clock.monotonic_s() - self._command_s >= timeout_s - TIMEOUT_TOLERANCE_S:
+                self.watchdog_s() - self._command_s >= timeout_s - TIMEOUT_TOLERANCE_S:
             self._command_s = None  # stopped: nothing left to expire
             self.sim.command(0.0, 0.0)
         self.sim.step()
@@ -206,3 +218,4 @@ class VirtualRobot:
     def reset(self) -> None:
         """Back to spawn with odometry zeroed (``/reset_simulation``)."""
         self.sim.reset()
+        self._command_s = None  # the reset stopped it: nothing left to expire
