@@ -224,6 +224,7 @@ def test_at_max_speed_a_client_gets_every_odom_and_the_run_is_the_headless_one()
     assert (last_x, last_y) != pytest.approx((0.0, 0.0), abs=0.05)  # it went somewhere
 
 
+@pytest.mark.slow
 def test_at_max_speed_a_stalled_client_is_released_and_the_others_lose_nothing() -> None:
     server = start_server(["--speed", "max"])
     try:
