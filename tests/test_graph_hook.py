@@ -10,8 +10,10 @@ import json
 from collections.abc import Mapping
 from typing import Any
 
+import cbor2
 import pytest
 from robot_rig import robot_rig
+from rosbags.typesys import Stores, get_typestore
 
 from physics import ConfigError, RobotParams, Simulation, load_world
 from ros_nodes.virtual_robot_core import VirtualRobot
@@ -131,6 +133,66 @@ def test_a_missing_message_package_leaves_client_relay_working() -> None:
     assert [frame["msg"] for frame in rig.drain(listener) if frame["op"] == "publish"] == [
         {"data": 1}]
     assert not any(call[0] == "publish" for call in rig.graph.calls)
+
+
+def cdr_payloads(session: Session) -> list[Any]:
+    """What ``session`` was sent: each cbor-raw frame's CDR decoded (rosbags), else the frame."""
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    out: list[Any] = []
+    while (frame := session.outbox.pop()) is not None:
+        if isinstance(frame, bytes):
+            envelope = cbor2.loads(frame)
+            out.append(store.deserialize_cdr(envelope["msg"]["bytes"], "std_msgs/msg/String"))
+        else:
+            out.append(json.loads(frame))
+    return out
+
+
+def test_a_cbor_raw_subscribe_without_a_type_gets_a_graph_topics_cdr() -> None:
+    # Lichtblick's RosbridgePlayer: the type only rosapi knows (the graph's), none given.
+    rig = Rig(RecordingGraph({"/chatter": "std_msgs/msg/String"}))
+    player = rig.client()
+    rig.send(player, {"op": "subscribe", "topic": "/chatter", "compression": "cbor-raw"})
+    assert rig.graph.calls == [("subscribe", "/chatter", None)]
+    # what the relay does: the message with the type its rclpy subscription took, latched
+    rig.bridge.publish("/chatter", {"data": "hello"}, latch=True,
+                       type_name="std_msgs/msg/String")
+    [message] = cdr_payloads(player)
+    assert message.data == "hello"
+
+
+def test_a_late_subscriber_gets_the_latched_graph_message_as_cdr_with_or_without_type() -> None:
+    rig = Rig(RecordingGraph({"/chatter": "std_msgs/msg/String"}))
+    first = rig.client()
+    rig.send(first, {"op": "subscribe", "topic": "/chatter", "compression": "cbor-raw"})
+    rig.bridge.publish("/chatter", {"data": "latched"}, latch=True,
+                       type_name="std_msgs/msg/String")
+    assert [m.data for m in cdr_payloads(first)] == ["latched"]
+    for subscribe in ({"type": "std_msgs/msg/String"}, {}):  # no new message in between
+        late = rig.client()
+        rig.send(late, {"op": "subscribe", "topic": "/chatter", "compression": "cbor-raw",
+                        **subscribe})
+        assert [m.data for m in cdr_payloads(late)] == ["latched"]
+
+
+def test_an_in_process_message_takes_the_type_a_subscription_named_for_its_topic() -> None:
+    rig = Rig()
+    untyped, typed = rig.client(), rig.client()
+    rig.send(untyped, {"op": "subscribe", "topic": "/mystery", "compression": "cbor-raw"})
+    rig.bridge.publish("/mystery", {"data": "x"})  # nobody knows its type
+    [status] = cdr_payloads(untyped)
+    assert status["op"] == "status" and "its type is not known" in status["msg"]
+    rig.send(typed, {"op": "subscribe", "topic": "/mystery", "type": "std_msgs/msg/String"})
+    rig.bridge.publish("/mystery", {"data": "y"}, latch=True)
+    assert [m.data for m in cdr_payloads(untyped)] == ["y"]
+
+
+def test_cbor_raw_of_a_graph_type_websim_cannot_serialize_is_refused_at_subscribe() -> None:
+    rig = Rig(RecordingGraph({"/custom": "my_pkg/msg/Custom"}))
+    player = rig.client()
+    rig.send(player, {"op": "subscribe", "topic": "/custom", "compression": "cbor-raw"})
+    [status] = rig.drain(player)
+    assert "my_pkg/msg/Custom is not a type websim can serialize" in status["msg"]
 
 
 def test_the_watchdog_stops_after_cmd_vel_timeout() -> None:

@@ -88,14 +88,14 @@ class RosRuntime:
             self.context.try_shutdown()
             raise
 
-        def publish(topic: str, msg: Message, latched: bool) -> None:
-            flush = bridge.publish(topic, msg, latched)
+        def publish(topic: str, type_name: str, msg: Message, latched: bool) -> None:
+            flush = bridge.publish(topic, msg, latched, type_name)
             if writers is not None:
                 writers.write(flush)
 
-        def deliver(topic: str, msg: Message, latched: bool) -> None:
+        def deliver(topic: str, type_name: str, msg: Message, latched: bool) -> None:
             with contextlib.suppress(RuntimeError):  # the loop closed while shutting down
-                loop.call_soon_threadsafe(publish, topic, msg, latched)
+                loop.call_soon_threadsafe(publish, topic, type_name, msg, latched)
 
         self.relay = GraphRelay(self.relay_node, deliver)
         self.executor = SingleThreadedExecutor(context=self.context)

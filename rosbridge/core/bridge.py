@@ -115,13 +115,17 @@ class Bridge:
 
     # ---- what in-process endpoints use ------------------------------------------------------
 
-    def publish(self, topic: str, msg: Any, latch: bool = False) -> Flush:
+    def publish(self, topic: str, msg: Any, latch: bool = False,
+                type_name: str | None = None) -> Flush:
         """Queue an in-process message (the robot's, the graph's) for ``topic``'s subscribers.
+
+        ``type_name``: its type as its publisher knows it (the ROS graph's messages carry
+        theirs); None: the type ``topic`` is known to carry (the robot's own topics).
 
         Returns:
             who must be written now (``Flush``).
         """
-        self.topics.publish(topic, msg, latch)
+        self.topics.publish(topic, msg, latch, type_name)
         return self.take_flush()
 
     def publish_many(self, messages: list[tuple[str, Any]],

@@ -152,9 +152,11 @@ def publisher_qos(endpoints: list[Any]) -> QoSProfile:
                       else DurabilityPolicy.VOLATILE)
 
 
-Deliver = Callable[[str, Message, bool], None]
-"""``deliver(topic, msg_dict, latched)``: a message from the graph; ``latched``: its topic is
-transient local (every publisher's durability), so the bridge keeps it for later subscribers."""
+Deliver = Callable[[str, str, Message, bool], None]
+"""``deliver(topic, type_name, msg_dict, latched)``: a message from the graph, with the type
+it was received as (``pkg/msg/Type``: what its ``cbor-raw`` form is serialized as);
+``latched``: its topic is transient local (every publisher's durability), so the bridge keeps
+it for later subscribers."""
 
 
 def publisher_key(info: Mapping[str, Any]) -> tuple[bytes, int]:
@@ -234,7 +236,7 @@ class GraphRelay:
             if position and position <= relayed.get(gid, 0):
                 return  # relayed (and latched) already: a replay for a new subscription
             relayed[gid] = position
-            deliver(topic, to_dict(msg), latched)
+            deliver(topic, type_name, to_dict(msg), latched)
 
         old = self._subscriptions.pop(topic, None)
         if old is not None:

@@ -297,7 +297,7 @@ def test_cbor_raw_odom_is_cdr_that_rosbags_decodes_to_the_json_odom_of_the_same_
 
 
 def test_cbor_raw_of_a_message_that_cannot_be_serialized_is_an_error_status() -> None:
-    frame = Encoded("/custom", {"data": 1}).frame("cbor-raw", None, "my_pkg/msg/Custom")
+    frame = Encoded("/custom", {"data": 1}, "my_pkg/msg/Custom").frame("cbor-raw")
     assert isinstance(frame, str)
     status = json.loads(frame)
     assert status["op"] == "status" and status["level"] == "error"

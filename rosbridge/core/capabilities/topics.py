@@ -97,16 +97,19 @@ class Encoded:
     Args:
         topic: the topic it is published on.
         msg: the message (canonical form).
+        type_name: its type (``pkg/msg/Type``), known where it is published (the publisher's
+            advertisement, the robot's own topic, the ROS graph's subscription): its
+            ``cbor-raw`` form is serialized as it, and where a topic carries several types
+            (/cmd_vel: Twist and TwistStamped) it goes to the subscribers of its type. None:
+            not known, so it has no ``cbor-raw`` form.
         clock: what stamps its ``cbor-raw`` frame (``stamp_s``; default: wall time).
         faults: where a form that fails to be made is recorded (default: nowhere).
-        type_name: its type where the topic may carry several (a client's publish).
     """
 
-    def __init__(self, topic: str, msg: Any, clock: Clock = WALL_CLOCK,
-                 faults: Faults | None = None, type_name: str | None = None) -> None:
+    def __init__(self, topic: str, msg: Any, type_name: str | None = None,
+                 clock: Clock = WALL_CLOCK, faults: Faults | None = None) -> None:
         self.topic = topic
         self.type_name = type_name
-        """The message's type when it is a client's (``pkg/msg/Type``); None: the topic's."""
         self._clock = clock
         self._faults = faults
         self.envelope = {"op": "publish", "topic": topic, "msg": msg}
@@ -140,23 +143,24 @@ class Encoded:
                 + self._variant_bytes)
 
     def frame(self, compression: str, fragment_size: int | None = None,
-              type_name: str | None = None, namespace: str = "") -> Frames:
+              namespace: str = "") -> Frames:
         """The frames for subscribers that asked for ``compression`` and ``fragment_size``.
 
         ``fragment_size``: the client's; it is rounded (``topic_fragment_size``).
-        ``type_name``: the topic's type, for ``cbor-raw``; a message that cannot be
-        serialized gets an error ``status`` frame in its place. ``namespace``: the prefix
-        of the topic's name for the subscriber (``Session.namespace``). Made now, even a
-        costly format (``entry`` defers those).
+        ``namespace``: the prefix of the topic's name for the subscriber
+        (``Session.namespace``). A message that cannot be serialized as ``cbor-raw`` (its
+        type unknown or not one websim can serialize) gets an error ``status`` frame in its
+        place, made again for each asker: it is never kept as the message's form. Made now,
+        even a costly format (``entry`` defers those).
 
         Raises:
             ValueError: the message cannot be written in this format at all (JSON, CBOR).
         """
-        entry = self.entry(compression, fragment_size, type_name, namespace)
+        entry = self.entry(compression, fragment_size, namespace)
         return entry.make() if isinstance(entry, Deferred) else entry
 
     def entry(self, compression: str, fragment_size: int | None = None,
-              type_name: str | None = None, namespace: str = "") -> Frames | Deferred:
+              namespace: str = "") -> Frames | Deferred:
         """As ``frame``, but a costly format comes back ``Deferred``: made when written.
 
         Raises:
@@ -174,7 +178,7 @@ class Encoded:
         deferred = self._deferred.get(key)
         if deferred is None:  # one for every subscriber of this form
             deferred = self._deferred[key] = Deferred(
-                functools.partial(self._variant, key, type_name), len(self.json))
+                functools.partial(self._variant, key), len(self.json))
         return deferred
 
     def _cheap(self, compression: str, namespace: str) -> Frames:
@@ -188,7 +192,8 @@ class Encoded:
             raise ValueError(failed)  # recorded the first time, not again
         try:
             if namespace:  # the same message under the name the subscriber knows it by
-                named = Encoded(namespace + self.topic, self.envelope["msg"], self._clock)
+                named = Encoded(namespace + self.topic, self.envelope["msg"], self.type_name,
+                                self._clock)
                 frames = named._cheap(compression, "")
             else:
                 frames = to_cbor(self.envelope) if compression == "cbor" else self.json
@@ -198,14 +203,23 @@ class Encoded:
         self._frames[key] = frames
         return frames
 
-    def _variant(self, key: tuple[str, int | None, str], type_name: str | None) -> Frames:
-        """A costly form, made for the subscriber being written (kept if there is room)."""
+    def _variant(self, key: tuple[str, int | None, str]) -> Frames:
+        """A costly form, made for the subscriber being written (kept if there is room).
+
+        A ``cbor-raw`` form that cannot be made (``cdr.CdrError``: the type is unknown or
+        not one websim serializes) is an error ``status`` for this subscriber, never kept:
+        a refusal is not the message's form.
+        """
         made = self._variants.get(key)
         if made is not None:
             return made
         compression, size, namespace = key
         try:
-            frames = self._encode(compression, size, type_name, namespace)
+            frames = self._encode(compression, size, namespace)
+        except cdr.CdrError as error:
+            return to_json({"op": "status", "level": "error",
+                            "msg": shorten(f"cbor-raw: a message on {namespace}{self.topic} "
+                                           f"cannot be sent as CDR: {error}")})
         except Exception as error:  # one subscriber's format is not the others'
             if self._faults is not None and compression not in self._failed:
                 self._faults.record(f"encoding {self.topic} as {compression}", error)
@@ -221,28 +235,25 @@ class Encoded:
         return frames
 
     def _encode(self, compression: str, fragment_size: int | None,
-                type_name: str | None, namespace: str) -> Frames:
+                namespace: str) -> Frames:
+        """A costly form; raises ``cdr.CdrError`` if it is ``cbor-raw`` and cannot be made."""
         if namespace:  # the same message under the name the subscriber knows the topic by
-            named = Encoded(namespace + self.topic, self.envelope["msg"], self._clock)
-            return named._encode(compression, fragment_size, type_name, "")
+            named = Encoded(namespace + self.topic, self.envelope["msg"], self.type_name,
+                            self._clock)
+            return named._encode(compression, fragment_size, "")
         if compression == "cbor":
             return to_cbor(self.envelope)
         if compression == "cbor-raw":
-            return self._cbor_raw(type_name)
+            return self._cbor_raw()
         text = png_frame(self.json) if compression == "png" else self.json
         if fragment_size is not None and len(text) > fragment_size:
             return fragment(text, fragment_size)
         return text
 
-    def _cbor_raw(self, type_name: str | None) -> Frames:
-        try:
-            if type_name is None:
-                raise cdr.CdrError("its type is not known yet")
-            data = cdr.to_cdr(type_name, self.envelope["msg"])
-        except cdr.CdrError as error:
-            return to_json({"op": "status", "level": "error",
-                            "msg": f"cbor-raw: a message on {self.topic} cannot be sent as "
-                                   f"CDR: {error}"})
+    def _cbor_raw(self) -> Frames:
+        if self.type_name is None:
+            raise cdr.CdrError("its type is not known")
+        data = cdr.to_cdr(self.type_name, self.envelope["msg"])
         return cbor_raw_frame(self.topic, data, self._clock.stamp_s())
 
 
@@ -304,9 +315,15 @@ class Topics:
         self._types.setdefault(topic, normalized)
         self._local.setdefault(topic, {}).setdefault(normalized, []).append(callback)
 
-    def publish(self, topic: str, msg: Any, latch: bool = False) -> None:
-        """Queue an in-process message (the robot's, the ROS graph's) for ``topic``'s clients."""
-        encoded = Encoded(topic, msg, self._context.clock, self._context.faults)
+    def publish(self, topic: str, msg: Any, latch: bool = False,
+                type_name: str | None = None) -> None:
+        """Queue an in-process message (the robot's, the ROS graph's) for ``topic``'s clients.
+
+        ``type_name``: its type, as its publisher knows it (the ROS graph's subscription
+        does); None: the type ``topic`` is known to carry here (the robot's own topics).
+        """
+        encoded = Encoded(topic, msg, type_name or self._type_of(topic), self._context.clock,
+                          self._context.faults)
         if latch:
             self._latch(topic, _Latched(encoded, None))
         _run(self._deliver([encoded]))
@@ -339,7 +356,8 @@ class Topics:
         (monotonic s), the time throttles measure against, so a tick that runs late does not
         make a throttled client miss its message.
         """
-        return self._deliver([Encoded(topic, msg, self._context.clock, self._context.faults)
+        return self._deliver([Encoded(topic, msg, self._type_of(topic), self._context.clock,
+                                      self._context.faults)
                               for topic, msg in messages], tick_s)
 
     def has_subscribers(self, topic: str) -> bool:
@@ -479,7 +497,7 @@ class Topics:
             except self._context.refusals as error:
                 raise BridgeError(f"{topic}: {error}") from None
         self._published_s[session] = self._context.clock.monotonic_s()
-        encoded = Encoded(topic, msg, self._context.clock, self._context.faults, type_name)
+        encoded = Encoded(topic, msg, type_name, self._context.clock, self._context.faults)
         if latch:
             self._latch(topic, _Latched(encoded, session, size))
         _run(self._deliver([encoded]))
@@ -551,7 +569,7 @@ class Topics:
         subscription.last_sent_s = now
         try:
             frame = encoded.entry(subscription.compression, session.fragment_size,
-                                  encoded.type_name or self._type_of(topic), session.namespace)
+                                  session.namespace)
         except (TypeError, ValueError) as error:  # a message no encoder can write
             if encoded.report_failure(subscription.compression):
                 self._context.faults.record(f"encoding {topic}", error)
@@ -612,17 +630,19 @@ class Topics:
             _, length = subscription.effective()
             try:
                 frames = latched.encoded.entry(subscription.compression,
-                                               session.fragment_size,
-                                               latched.encoded.type_name or self._type_of(topic),
-                                               session.namespace)
+                                               session.fragment_size, session.namespace)
             except (TypeError, ValueError) as error:
                 raise BridgeError(f"subscribe {topic}: its latched message cannot be sent as "
                                   f"{subscription.compression}: {error}") from None
             session.queue_topic(topic, frames, length)
 
     def _check_cdr(self, topic: str) -> None:
-        """Refuse ``cbor-raw`` on a topic whose known type cannot be serialized as CDR."""
-        type_name = self._type_of(topic)
+        """Refuse ``cbor-raw`` on a topic whose known type cannot be serialized as CDR.
+
+        Known here or, as a subscribe without a type to a graph-only topic needs, on the
+        ROS graph (what rosapi lists).
+        """
+        type_name = self._inferred_type(topic)
         if type_name is not None and not cdr.serializable(type_name):
             raise BridgeError(f"subscribe {topic}: cbor-raw needs the message's CDR bytes, "
                               f"and {type_name} is not a type websim can serialize; "
