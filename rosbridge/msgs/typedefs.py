@@ -29,6 +29,7 @@ from typing import Any
 from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from rosbridge.msgs.definitions import shipped_definitions
 from rosbridge.msgs.values import normalize_service_type, normalize_type
 
 MESSAGE_DEFINITIONS = {
@@ -105,8 +106,14 @@ Definition = tuple[list[tuple[str, str, Any]], list[tuple[str, Any]]]
 
 @functools.cache
 def _definitions() -> Mapping[str, Definition]:
-    """The typestore's messages plus ``MESSAGE_DEFINITIONS`` and every service's two parts."""
+    """The typestore's messages, the shipped ones, ``MESSAGE_DEFINITIONS``, services' parts.
+
+    The shipped ones (``definitions.shipped_definitions``: example_interfaces, the TF
+    republisher's...) too, so a topic of theirs has its full text in rosapi's
+    ``topics_and_raw_types`` (what Foxglove and Lichtblick decode it with).
+    """
     defs: dict[str, Any] = dict(get_typestore(Stores.ROS2_HUMBLE).fielddefs)
+    defs.update(shipped_definitions())
     for name, text in MESSAGE_DEFINITIONS.items():
         defs.update(get_types_from_msg(text, name))
     for name, text in SERVICE_DEFINITIONS.items():
