@@ -37,6 +37,8 @@ from rosbridge.core.errors import ServiceError
 from rosbridge.core.faults import Faults
 from rosbridge.core.limits import LatchedBytes
 from rosbridge.core.session import Session
+from rosbridge.tf.republisher import ACTION as TF_REPUBLISHER_ACTION
+from rosbridge.tf.republisher import REPUBLISH_SERVICE, TfRepublisher
 from rosbridge.transport.schedule import Schedule
 
 log = logging.getLogger("websim.robot")
@@ -61,13 +63,16 @@ enrolled the name: the page keeps it)."""
 DRIVE_RULES = DriveRules(
     topics=frozenset(spec.name for spec in ROBOT_TOPICS if spec.direction == "in"),
     services=frozenset({RESET_SERVICE}),
-    watch_services=(*RESERVED_NAMESPACES, RESET_SERVICE),
+    watch_services=(*RESERVED_NAMESPACES, RESET_SERVICE, REPUBLISH_SERVICE),
+    watch_actions=frozenset({TF_REPUBLISHER_ACTION}),
     hint=": connect to ws://HOST:9090/robots/NAME?token=TOKEN with the robot's token (the "
          "links file, or the page the student enrolled it with)")
 """What a class robot's client needs its token for: driving it (the topics it subscribes),
 resetting it, offering services or actions on it, calling services it does not offer (a
-classmate's code's, the ROS graph's). Changing its parameters and pausing it
-need admin rights (``require_admin``: the robot's token or the instructor's) in any case."""
+classmate's code's, the ROS graph's). Watching includes the TF republisher (its service and
+action only read the robot's TF tree: ros3djs pages need them). Changing its parameters and
+pausing it need admin rights (``require_admin``: the robot's token or the instructor's) in any
+case."""
 
 
 @dataclass
@@ -126,6 +131,8 @@ class RobotHost:
                              reserved_namespaces=RESERVED_NAMESPACES,
                              drive_rules=DRIVE_RULES, latched=latched)
         self.endpoint = RobotEndpoint(self.bridge, robot)
+        self.tf_republisher = TfRepublisher(self.bridge)
+        """tf2_web_republisher's service and action, from the robot's /tf and /tf_static."""
         self.stats = TickStats()
         self.schedule = schedule or Schedule(TICK_PERIOD_S, clock)
         self.held = False
@@ -219,6 +226,10 @@ class RobotHost:
                 writers.write(flush)
         except Exception as error:  # the robot's boundary: record, go on
             self.faults.record(f"delivering {', '.join(name for name, _ in messages)}", error)
+        try:
+            self.tf_republisher.step(self._clock.monotonic_s() - lateness_s)
+        except Exception as error:  # the robot's boundary: record, go on
+            self.faults.record("republishing TF", error)
         try:
             self.bridge.services.expire()
             writers.write(self.bridge.take_flush())

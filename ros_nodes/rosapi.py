@@ -42,6 +42,7 @@ from ros_nodes.parameters import (
 from ros_nodes.robot_interface import NODE_NAME, NODE_TOPICS, ROBOT_TOPICS
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge
+from rosbridge.core.capabilities.actions import normalize_action_type
 from rosbridge.core.capabilities.services import ServiceHandler, ViaGraph
 from rosbridge.core.encoding import parse_json
 from rosbridge.core.errors import ServiceError, shorten
@@ -230,9 +231,10 @@ def _graph_handlers(bridge: Bridge) -> dict[str, Handler]:
         "node_details": node_details,
         "publishers": lambda args, session: {"publishers": channel(args, "publishing")},
         "subscribers": lambda args, session: {"subscribers": channel(args, "subscribing")},
-        "action_servers": lambda args, session: {
-            "action_servers": action_servers([name for name, _ in topic_list()])},
-        "action_type": lambda args, session: {"type": ""},
+        "action_servers": lambda args, session: {"action_servers": sorted(
+            {*action_servers([name for name, _ in topic_list()]), *bridge.actions.types()})},
+        "action_type": lambda args, session: {
+            "type": bridge.actions.types().get(args["action"], "")},
     }
 
 
@@ -241,8 +243,14 @@ def _type_handlers(bridge: Bridge) -> dict[str, Handler]:
         return lambda args, session: {"typedefs": typedefs.service_typedefs(args["type"],
                                                                             part)}
 
-    def no_actions(args: dict[str, str], session: Session) -> Mapping[str, Any]:
-        return {"typedefs": []}  # the robot offers no actions: every action type is unknown
+    def action_part(part: str) -> Handler:  # the in-process actions' (the TF republisher's)
+        def typedefs_of(args: dict[str, str], session: Session) -> Mapping[str, Any]:
+            try:
+                action_type = normalize_action_type(args["type"])
+            except ValueError:
+                return {"typedefs": []}
+            return {"typedefs": typedefs.message_typedefs(f"{action_type}_{part}")}
+        return typedefs_of
 
     return {
         "interfaces": lambda args, session: {
@@ -251,9 +259,9 @@ def _type_handlers(bridge: Bridge) -> dict[str, Handler]:
             "typedefs": typedefs.message_typedefs(args["type"])},
         "service_request_details": details("Request"),
         "service_response_details": details("Response"),
-        "action_goal_details": no_actions,
-        "action_result_details": no_actions,
-        "action_feedback_details": no_actions,
+        "action_goal_details": action_part("Goal"),
+        "action_result_details": action_part("Result"),
+        "action_feedback_details": action_part("Feedback"),
     }
 
 

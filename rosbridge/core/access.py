@@ -7,8 +7,9 @@ A client without the drive right (``Session.may_drive``: a class robot's client 
 neither the robot's token nor the instructor's) may only watch: subscribe, list, call the
 services that change nothing. What changes the robot is the bridge's owner's to say
 (``DriveRules``: the topics the robot subscribes, its services that change it, the namespaces
-of its own services, the only ones a watcher may call); offering services or actions, and
-sending goals, always need the right.
+of its own services, the only ones a watcher may call, and the in-process actions that only
+read, to which a watcher may send goals); offering services or actions, and sending other
+goals, always need the right.
 
 Every client (student or admin) may:
 
@@ -50,16 +51,19 @@ class DriveRules:
     Attributes:
         topics: topics the robot subscribes (``/cmd_vel``): publishing them needs the right.
         services: services that change the robot (``/reset_simulation``).
-        watch_services: the namespaces of the services a client without the right may call
-            (the robot's own: ``/rosapi/``...), but for ``services``; any other service (one
-            a client offers, the ROS graph's) needs the right. Empty: every service but
-            ``services``.
+        watch_services: the namespaces (or names) of the services a client without the right
+            may call (the robot's own: ``/rosapi/``...), but for ``services``; any other
+            service (one a client offers, the ROS graph's) needs the right. Empty: every
+            service but ``services``.
+        watch_actions: the in-process actions that change nothing (the TF republisher's),
+            to which a client without the right may send goals; any other goal needs it.
         hint: how to get the right, appended to a refusal.
     """
 
     topics: frozenset[str] = frozenset()
     services: frozenset[str] = frozenset()
     watch_services: tuple[str, ...] = ()
+    watch_actions: frozenset[str] = frozenset()
     hint: str = ""
 
     def refusal(self, what: str) -> str:
@@ -135,7 +139,7 @@ def check(client: Holder, op: str, name: str, reserved: tuple[str, ...] = (),
 
 def _check_drive(op: str, name: str, drive: DriveRules) -> None:
     """Raise ``AccessError`` if ``op`` on ``name`` changes the robot."""
-    if op in DRIVE_OPS:
+    if op in DRIVE_OPS and not (op == "send_action_goal" and name in drive.watch_actions):
         raise AccessError(drive.refusal(f"{op} {name}"))
     if op in ("advertise", "publish") and name in drive.topics:
         raise AccessError(drive.refusal(f"publishing {name}"))

@@ -107,6 +107,7 @@ class Bridge:
         self.topics = Topics(self._context)
         self.services = Services(self._context, service_timeout_s)
         self.actions = Actions(self._context)
+        self._leaving: list[Callable[[Session], None]] = []
         self._handlers: dict[str, Handler] = {
             **self.topics.handlers(), **self.services.handlers(), **self.actions.handlers(),
             "set_level": self._set_level, "auth": lambda session, message: None,
@@ -141,6 +142,14 @@ class Bridge:
             yield self.take_flush()
         yield self.take_flush()
 
+    def on_disconnect(self, forget: Callable[[Session], None]) -> None:
+        """Have ``forget(session)`` called when a client leaves, after the capabilities forgot it.
+
+        For an in-process endpoint that holds something per client (the TF republisher's
+        republications), so that it is freed when its client leaves.
+        """
+        self._leaving.append(forget)
+
     def take_flush(self) -> Flush:
         """Who must be written for what was queued since the last call returned its ``Flush``.
 
@@ -170,6 +179,11 @@ class Bridge:
         self.topics.disconnect(session)
         self.services.disconnect(session)
         self.actions.disconnect(session)
+        for forget in self._leaving:
+            try:
+                forget(session)
+            except Exception as error:  # an endpoint's bug must not keep the client's state
+                self.faults.record("forgetting a client", error)
         self._context.ready.pop(session, None)
         self._context.closing.pop(session, None)
         return self.take_flush()

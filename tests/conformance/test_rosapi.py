@@ -172,12 +172,12 @@ def test_services_for_type_service_node_and_providers_name_the_robot(ros: roslib
     assert by_type["providers"] == by_name["providers"] == ["/virtual_robot"]
 
 
-def test_action_servers_are_none_and_interfaces_list_the_known_types(
+def test_action_servers_are_the_tf_republishers_and_interfaces_list_the_known_types(
         ros: roslibpy.Ros) -> None:
     servers: list[Any] = []
     ros.get_action_servers(lambda values: servers.append(values["action_servers"]))
     wait_for(lambda: servers, ANSWER_TIMEOUT_S, "the action servers")
-    assert servers == [[]]
+    assert servers == [["/tf2_web_republisher"]]  # served in-process (rosbridge.tf)
     interfaces = call(ros, "interfaces")["ok"]["interfaces"]
     assert {"nav_msgs/msg/Odometry", "rcl_interfaces/msg/Log",
             "rosapi_msgs/srv/GetParam"} <= set(interfaces)

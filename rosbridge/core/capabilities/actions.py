@@ -15,6 +15,10 @@ A goal that no server took gets ``result: false``, status UNKNOWN and the reason
 ``values`` at once (rosbridge's failure answer, never a hang), and a goal whose server
 leaves or unadvertises gets ``result: false``, status ABORTED and the reason.
 
+An action may also be served in-process (``add``: the TF republisher's), as services are:
+its goals go to a handler on the bridge's thread, which answers through the goal's
+``GoalSender`` and is told when the goal is cancelled or its sender leaves.
+
 An action belongs to whoever advertised it first, as a service does. Goals are bounded per
 sender (``ClientLimits.max_goals``) and per action (``max_goals_per_action``, the server's).
 """
@@ -66,6 +70,13 @@ class GoalSender(Protocol):
 
 GoalHandler = Callable[[Any, GoalSender], Cancel]
 """Takes a goal from the graph to a client's action: (args, sender) -> how to cancel it."""
+
+LocalGoalHandler = Callable[[Any, GoalSender, Session], Cancel]
+"""An in-process action server (``Actions.add``): (goal args in canonical form, the sender
+its feedback and result go to, the client that sent it) -> how to cancel the goal. Called on
+the bridge's thread; it raises one of ``Bridge.refusals`` to refuse the goal with a reason.
+Cancelling it (the sender's ``cancel_action_goal``, or the sender leaving) must stop its
+feedback; it may still answer with a result (CANCELED)."""
 
 
 class ActionGraph(Protocol):
@@ -124,8 +135,10 @@ class _Goal:
         owner: the client that sent it (None: a node on the ROS graph).
         owner_id: its id in the owner's ``send_action_goal`` (None: none given).
         action: the action's name.
-        server: the client serving it (None: the graph's action server).
-        cancel_on_graph: how to cancel it on the graph (graph-served goals only).
+        server: the client serving it (None: the graph's action server, or an in-process
+            one).
+        local: it is served in-process (``Actions.add``).
+        cancel_elsewhere: how to cancel it where it runs: on the graph, or in-process.
     """
 
     sender: GoalSender
@@ -133,7 +146,8 @@ class _Goal:
     owner_id: Any
     action: str
     server: Session | None
-    cancel_on_graph: Cancel | None = None
+    local: bool = False
+    cancel_elsewhere: Cancel | None = None
 
 
 class Actions:
@@ -158,6 +172,7 @@ class Actions:
         self._sent_counts: dict[Session, int] = {}
         self._served_counts: dict[str, int] = {}
         self._numbers = itertools.count(1)
+        self._local: dict[str, tuple[str, LocalGoalHandler]] = {}
 
     def handlers(self) -> dict[str, Callable[[Session, dict[str, Any]], None]]:
         """This capability's ops."""
@@ -165,13 +180,23 @@ class Actions:
                 "send_action_goal": self._send_goal, "cancel_action_goal": self._cancel_goal,
                 "action_feedback": self._feedback, "action_result": self._result}
 
+    def add(self, action: str, type_name: str, handler: LocalGoalHandler) -> None:
+        """Serve ``action`` (of ``type_name``, ``pkg/action/Type``) in-process."""
+        self._local[action] = (normalize_action_type(type_name), handler)
+
+    def types(self) -> dict[str, str]:
+        """Every action served here and its type: the in-process ones and clients'."""
+        listed = {action: type_name for action, (type_name, _) in self._local.items()}
+        listed.update({action: type_name for action, (_, type_name) in self._servers.items()})
+        return listed
+
     def attach(self, graph: ActionGraph | None) -> None:
         """Send goals to and offer client actions on ``graph`` from now on (None: stop).
 
         Goals the previous graph was serving fail (ABORTED); goals it had sent are dropped.
         """
         for key, goal in list(self._goals.items()):
-            if goal.server is None:
+            if goal.server is None and not goal.local:
                 self._finish(key, "the ROS graph relay stopped", GoalStatus.ABORTED, False)
             elif goal.owner is None:
                 self._drop(key)
@@ -208,6 +233,9 @@ class Actions:
         if action in self._servers:
             self._forward(sender, session, goal_id, action, type_name, args)
             return
+        if action in self._local:
+            self._serve_here(sender, session, goal_id, action, type_name, args)
+            return
         if self._graph is None:
             raise BridgeError(f"Action {action} does not exist")
         # A server the graph has not shown yet may be starting: as rosbridge, the goal goes
@@ -222,7 +250,22 @@ class Actions:
             self._drop(key)
             raise
         if key in self._goals:
-            self._goals[key].cancel_on_graph = cancel
+            self._goals[key].cancel_elsewhere = cancel
+
+    def _serve_here(self, sender: GoalSender, owner: Session, owner_id: Any, action: str,
+                    type_name: str, args: Any) -> None:
+        """Hand a goal to ``action`` 's in-process server."""
+        local_type, handler = self._local[action]
+        if local_type != type_name:
+            raise BridgeError(f"{action} is of type {local_type}, not {type_name}")
+        key = self._register(_Goal(sender, owner, owner_id, action, None, local=True))
+        try:
+            cancel = handler(args, _Relay(self, key), owner)
+        except self._context.refusals:
+            self._drop(key)
+            raise
+        if key in self._goals:
+            self._goals[key].cancel_elsewhere = cancel
 
     def _forward(self, sender: GoalSender, owner: Session | None, owner_id: Any, action: str,
                  type_name: str, args: Any) -> str:
@@ -254,8 +297,8 @@ class Actions:
             if goal.server in self._context.sessions:
                 goal.server.reply({"op": "cancel_action_goal", "id": key,
                                    "action": goal.action})
-        elif goal.cancel_on_graph is not None:
-            goal.cancel_on_graph()
+        elif goal.cancel_elsewhere is not None:
+            goal.cancel_elsewhere()
 
     # ---- serving goals --------------------------------------------------------------------
 
@@ -311,6 +354,8 @@ class Actions:
     def _advertise(self, session: Session, message: dict[str, Any]) -> None:
         action = message["action"]
         type_name = _action_type(action, message["type"])
+        if action in self._local:
+            raise BridgeError(f"{action} is served by the simulator")
         server = self._servers.get(action)
         if server is not None and server[0] is not session:
             raise BridgeError(f"{action} is already provided by another client; it stays "

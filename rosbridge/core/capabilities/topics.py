@@ -52,6 +52,10 @@ LocalSubscriber = Callable[[Any, Session], None]
 It raises one of ``Bridge.refusals`` to refuse the message; the reason goes back to the
 publisher."""
 
+Listener = Callable[[Any], None]
+"""An in-process listener (``Topics.listen``): called with every message delivered on its
+topic, whoever published it (canonical form)."""
+
 
 MAX_VARIANTS = 4
 """Costly forms of one message (``png``, ``cbor-raw``, fragmented JSON, each per namespace
@@ -289,6 +293,9 @@ class Topics:
         """(client, topic) advertised with ``latch: true``: its every publish is latched."""
         self._published_s: dict[Session, float] = {}
         """When each client last published (monotonic s): the fan-out serves them first."""
+        self._listeners: dict[str, list[Listener]] = {}
+        """In-process listeners of every message on a topic (``listen``); a topic listened
+        to counts as subscribed (``subscribed_topics``), so its publisher builds it."""
         definitions.load()  # now, not at the first publish (it takes ~0.1 s)
 
     def handlers(self) -> dict[str, Callable[[Session, dict[str, Any]], None]]:
@@ -303,6 +310,41 @@ class Topics:
         """Declare ``topic`` published in-process (the robot's outputs): clients may not."""
         self._types[topic] = normalize_type(type_name)
         self._owned.add(topic)
+
+    def disown(self, topic: str) -> None:
+        """An in-process publisher gives ``topic`` up: clients may use it, its latched goes."""
+        if topic not in self._owned:
+            return
+        self._owned.discard(topic)
+        self._unlatch(topic)
+        if topic not in self._local and not any(
+                topic in other.advertised for other in self._context.sessions):
+            self._types.pop(topic, None)
+
+    def listen(self, topic: str, listener: Listener) -> None:
+        """Give ``listener`` every message delivered on ``topic`` from now on, and its latched one.
+
+        While anything listens, ``topic`` counts as subscribed (``subscribed_topics``): an
+        in-process publisher that builds only what is subscribed builds it.
+        """
+        self._listeners.setdefault(topic, []).append(listener)
+        latched = self._latched.get(topic)
+        if latched is not None:
+            self._hear(topic, listener, latched.encoded.envelope["msg"])
+
+    def unlisten(self, topic: str, listener: Listener) -> None:
+        """Stop giving ``listener`` the messages of ``topic``."""
+        listeners = self._listeners.get(topic)
+        if listeners is not None and listener in listeners:
+            listeners.remove(listener)
+            if not listeners:
+                del self._listeners[topic]
+
+    def _hear(self, topic: str, listener: Listener, msg: Any) -> None:
+        try:
+            listener(msg)
+        except Exception as error:  # an in-process listener's bug is not the delivery's
+            self._context.faults.record(f"listening to {topic}", error)
 
     def subscribe_local(self, topic: str, type_name: str, callback: LocalSubscriber) -> None:
         """Give ``callback`` every message clients publish on ``topic`` of ``type_name``.
@@ -369,8 +411,13 @@ class Topics:
         return dict(self._types)
 
     def subscribed_topics(self) -> Collection[str]:
-        """Topics some client subscribes to (a live view: do not keep it)."""
-        return self._subscribers.keys()
+        """Topics some client subscribes to or an in-process listener listens to.
+
+        A live view while nothing listens: do not keep it.
+        """
+        if not self._listeners:
+            return self._subscribers.keys()
+        return self._subscribers.keys() | self._listeners.keys()
 
     def relayed_topics(self) -> list[str]:
         """Topics some client subscribes to that the simulator does not publish.
@@ -530,6 +577,9 @@ class Topics:
         any, then queues them for the clients that only watch. ``now_s``: the time throttles
         measure against (default: the clock).
         """
+        for encoded in messages:
+            for listener in tuple(self._listeners.get(encoded.topic, ())):
+                self._hear(encoded.topic, listener, encoded.envelope["msg"])
         now = self._context.clock.monotonic_s() if now_s is None else now_s
         audiences = [(encoded, subscribers) for encoded in messages
                      if (subscribers := self._subscribers.get(encoded.topic))]
