@@ -83,13 +83,20 @@ if command -v node >/dev/null && [ "$lock" -nt web-interface/node_modules/.packa
     (cd web-interface && npm ci --no-audit --no-fund --loglevel=error >/dev/null)
 fi
 
-# roslib 2.x (ES modules only) for examples/course_snippets.mjs (tests/test_examples.py), pinned
-# by tests/node/roslib2/package-lock.json and installed the same way. Without it, or without
-# node, the roslib 2.x example tests are skipped.
-lock=tests/node/roslib2/package-lock.json
-if command -v node >/dev/null && [ "$lock" -nt tests/node/roslib2/node_modules/.package-lock.json ]; then
-    (cd tests/node/roslib2 && npm ci --no-audit --no-fund --loglevel=error >/dev/null)
-fi
+# Test-only npm packages, each folder pinned by its own package-lock.json and installed the
+# same way; without one, or without node, the tests that need it are skipped:
+# - tests/node/roslib2: roslib 2.x (ES modules only) for examples/course_snippets.mjs
+#   (tests/test_examples.py) and its ROS2TFClient (tests/test_viewers_tf.py);
+# - tests/node/ros3djs: ros3djs with its roslib 1.x and three.js, for a stock ros3djs page
+#   (tests/test_viewers_ros3djs.py);
+# - tests/node/lichtblick: Lichtblick's roslibjs fork, message parser and CDR reader, for its
+#   RosbridgePlayer's wire sequence (tests/test_viewers_lichtblick.py).
+for folder in tests/node/roslib2 tests/node/ros3djs tests/node/lichtblick; do
+    lock=$folder/package-lock.json
+    if command -v node >/dev/null && [ "$lock" -nt "$folder/node_modules/.package-lock.json" ]; then
+        (cd "$folder" && npm ci --no-audit --no-fund --loglevel=error >/dev/null)
+    fi
+done
 # --- end of Node.js ---------------------------------------------------------------------------
 
 # --- deployment test tools (tests/test_deploy_*.py) -------------------------------------------
