@@ -21,6 +21,7 @@ from ros_nodes.robot_description import robot_json
 from rosbridge.core import encoding, fragments, schema
 from rosbridge.core.capabilities import services, topics
 from rosbridge.core.limits import ClientLimits
+from rosbridge.tf.republisher import RepublisherLimits
 from rosbridge.transport import connection
 from websim.cli import main
 
@@ -41,7 +42,7 @@ def test_grading_docs_parameter_tables_are_made_from_the_metrics(kind: str) -> N
 
 
 def test_readme_limits_table_states_the_defaults_in_force() -> None:
-    limits = ClientLimits()
+    limits, tf = ClientLimits(), RepublisherLimits()
     rows = {
         "message size": f"{limits.max_frame_bytes >> 20} MiB",
         "message rate": f"{limits.max_rate:g} messages/s",
@@ -97,6 +98,11 @@ def test_readme_limits_table_states_the_defaults_in_force() -> None:
             f"{limits.address_bytes_per_s >> 20} MiB/s",
         "new names one address enrols in an open class":
             f"{limits.address_enrolments}, then {limits.address_enrolments_per_s:g}/s",
+        "TF republications (`/republish_tfs` topics and `/tf2_web_republisher` goals, "
+        "[docs/viewers.md](docs/viewers.md))":
+            f"{tf.per_client} per client, {tf.per_bridge} per robot; {tf.frames} frames each, "
+            f"a rate above 0 and at most {tf.max_rate_hz:g} Hz, a timeout of at most "
+            f"{tf.max_timeout_s:g} s",
     }
     for limit, default in rows.items():
         assert f"| {limit} | {default}" in README, f"README limits table: {limit}"
@@ -112,8 +118,8 @@ def test_committed_robot_json_is_the_shipped_robot() -> None:
 
 
 MARKDOWN_LINK = re.compile(r"\]\(([^)\s]+)\)")
-DOCS = ("README.md", "docs/course.md", "docs/assignments.md", "examples/README.md",
-        "docs/grading.md")
+DOCS = ("README.md", "docs/course.md", "docs/assignments.md", "docs/viewers.md",
+        "examples/README.md", "docs/grading.md")
 
 
 def github_anchor(heading: str) -> str:
