@@ -1,9 +1,10 @@
 """roslib 2.x's ROS2TFClient against a real ``websim serve``, unmodified, under Node.
 
 The client asks the action ``/tf2_web_republisher`` for base_link, then laser and odom (each a
-new goal, the previous one cancelled, as a page adding objects does) in fixed frame ``odom``;
-the robot drives an arc and stops; what the client handed its callbacks last must be the
-robot's pose from ``/odom`` and the laser at its mount, composed (``viewer_rig``).
+new goal, the previous one cancelled, as a page adding objects does) in fixed frame ``map``;
+the robot (spawned off the origin, map -> odom published: ``viewer_rig``) drives an arc and
+stops; what the client handed its callbacks last must be where ``/ground_truth``, ``/odom``
+and the laser's mount put each frame, composed by hand.
 """
 
 from __future__ import annotations
@@ -18,11 +19,11 @@ from typing import Any
 
 import pytest
 from page_helpers import Bridge, wait_until_still
-from viewer_rig import expected_pose, mounted_server, pose_of, same_pose
+from viewer_rig import expected_pose, planar, same_pose, viewer_server
 
 from server_process import ServerProcess, wait_for
 
-__all__ = ["mounted_server"]  # a fixture of this module
+__all__ = ["viewer_server"]  # a fixture of this module
 
 NODE = shutil.which("node")
 CLIENT_JS = Path(__file__).parent / "conformance" / "node" / "ros2_tf_client.mjs"
@@ -51,8 +52,8 @@ class NodeTfClient:
         for line in self.process.stdout:
             event = json.loads(line)
             with self._lock:
-                self._seen[event["frame"]].append(pose_of(event["translation"],
-                                                          event["rotation"]))
+                self._seen[event["frame"]].append(planar(event["translation"],
+                                                         event["rotation"]))
 
     def seen(self, frame: str) -> list[Any]:
         with self._lock:
@@ -65,19 +66,20 @@ class NodeTfClient:
 
 
 @pytest.fixture
-def bridge(mounted_server: ServerProcess) -> Iterator[Bridge]:
-    client = Bridge(mounted_server.ws_url)
+def bridge(viewer_server: ServerProcess) -> Iterator[Bridge]:
+    client = Bridge(viewer_server.ws_url)
     client.subscribe("/odom")
+    client.subscribe("/ground_truth")
     yield client
     client.close()
 
 
 @pytest.mark.skipif(SKIP is not None, reason=SKIP or "")
-def test_ros2_tf_client_gets_the_robots_frames_in_odom(mounted_server: ServerProcess,
-                                                       bridge: Bridge) -> None:
-    client = NodeTfClient(mounted_server.ws_url, "odom", FRAMES)
+def test_ros2_tf_client_gets_the_robots_frames_in_map(viewer_server: ServerProcess,
+                                                      bridge: Bridge) -> None:
+    client = NodeTfClient(viewer_server.ws_url, "map", FRAMES)
     try:
-        for frame in FRAMES:  # standing at spawn: the mount alone
+        for frame in FRAMES:
             wait_for(lambda frame=frame: client.seen(frame), timeout_s=20,
                      what=f"the client's first {frame} transform")
         bridge.send(op="publish", topic="/cmd_vel", msg={
@@ -89,13 +91,13 @@ def test_ros2_tf_client_gets_the_robots_frames_in_odom(mounted_server: ServerPro
             "linear": {"x": 0.0, "y": 0.0, "z": 0.0},
             "angular": {"x": 0.0, "y": 0.0, "z": 0.0}})
         odom = wait_until_still(bridge, timeout_s=10)
-        assert abs(expected_pose(odom, "base_link")[2]) > 0.3  # it turned: yaw was checked
+        truth = bridge.messages("/ground_truth")[-1]  # still too: of the same instant
+        assert abs(expected_pose("odom", "base_link", odom, truth).theta) > 0.3  # it turned
         for frame in FRAMES:
             wait_for(lambda frame=frame: client.seen(frame) and same_pose(
-                client.seen(frame)[-1], expected_pose(odom, frame)), timeout_s=10,
-                what=f"{frame} in the client to be where /odom and the mount put it")
-        assert len(client.seen("odom")) == 1  # odom in odom never moves: sent once
-        assert mounted_server.health()["status"] == "ok"
+                client.seen(frame)[-1], expected_pose("map", frame, odom, truth)),
+                timeout_s=10, what=f"{frame} in the client where the messages put it in map")
+        assert viewer_server.health()["status"] == "ok"
     finally:
         stderr = client.stop()
     assert "connection closed" not in stderr

@@ -1,9 +1,12 @@
-"""What the viewer tests share: a server whose laser is mounted off-centre, and its TF tree.
+"""What the viewer tests share: a server whose every frame differs, and its TF tree by hand.
 
-``websim serve`` with the shipped parameters but the LiDAR 10 cm ahead, 5 cm left and turned
-90 degrees (``MOUNT``), so that every transform a viewer is handed shows whether the
-odometry and the mount were composed, and in which order. ``expected_pose`` works a frame's
-pose in ``odom`` out by hand from an ``/odom`` message.
+``websim serve`` on the 6 m arena with the robot spawned off the origin and turned
+(``SPAWN``), ``localization: perfect`` (so ``map -> odom`` is on ``/tf``), and the LiDAR 10 cm
+ahead, 5 cm left and turned 90 degrees (``MOUNT``): every transform a viewer is handed shows
+whether map -> odom -> base_link -> laser were composed, and in which order.
+``expected_pose`` works a frame's pose in the fixed frame out from an ``/odom`` and a
+``/ground_truth`` message (map -> odom is what a perfect localizer publishes: the true pose
+composed with the odometry's inverse).
 """
 
 from __future__ import annotations
@@ -16,6 +19,10 @@ from typing import Any
 
 import pytest
 
+from physics.frames import compose, inverse
+from physics.snapshots import Pose2D
+
+from conftest import ARENA_HALF_M
 from server_process import ServerProcess, start_server
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -23,57 +30,70 @@ ROOT = Path(__file__).resolve().parent.parent
 MOUNT = {"mount_x_m": 0.1, "mount_y_m": 0.05, "mount_yaw_rad": math.pi / 2}
 """The laser in base_link: 10 cm ahead, 5 cm left, turned 90 degrees."""
 
+SPAWN = Pose2D(1.0, -0.5, 0.4)
+"""Where the robot starts in map (m, m, rad): odom's origin, so map -> odom is not identity."""
 
-def mounted_params(folder: Path) -> Path:
-    """The shipped parameters file with the laser at ``MOUNT``, written in ``folder``."""
+WORLD = f"""\
+name: viewer arena
+start: [{SPAWN.x}, {SPAWN.y}, {SPAWN.theta}]
+localization: perfect
+polylines:
+  - points: [[-{ARENA_HALF_M}, -{ARENA_HALF_M}], [{ARENA_HALF_M}, -{ARENA_HALF_M}],
+             [{ARENA_HALF_M}, {ARENA_HALF_M}], [-{ARENA_HALF_M}, {ARENA_HALF_M}]]
+    closed: true
+"""
+"""worlds/empty.yaml's arena, the robot spawned at ``SPAWN``, map -> odom published."""
+
+
+def viewer_files(folder: Path) -> tuple[Path, Path]:
+    """(world, parameters): ``WORLD`` and the shipped parameters with the laser at ``MOUNT``."""
     text = (ROOT / "config" / "pi4b_params.yaml").read_text()
     for key, value in MOUNT.items():
         text, count = re.subn(rf"^(\s*{key}:\s*)\S+", rf"\g<1>{value!r}", text, flags=re.M)
         assert count == 1, key
-    path = folder / "mounted_params.yaml"
-    path.write_text(text)
-    return path
+    params, world = folder / "mounted_params.yaml", folder / "viewer_arena.yaml"
+    params.write_text(text)
+    world.write_text(WORLD)
+    return world, params
 
 
 @pytest.fixture(scope="module")
-def mounted_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
-    """``websim serve`` on the empty world with the laser at ``MOUNT``."""
-    params = mounted_params(tmp_path_factory.mktemp("params"))
-    running = start_server(["--params", str(params)])
+def viewer_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    """``websim serve`` on ``WORLD`` with the laser at ``MOUNT``."""
+    world, params = viewer_files(tmp_path_factory.mktemp("viewer"))
+    running = start_server(["--world", str(world), "--params", str(params)])
     yield running
     running.stop()
 
 
-def planar_pose(odom: dict[str, Any]) -> tuple[float, float, float]:
-    """(x, y, yaw) of an ``/odom`` message's pose (m, rad)."""
-    p, q = odom["pose"]["pose"]["position"], odom["pose"]["pose"]["orientation"]
-    return p["x"], p["y"], 2.0 * math.atan2(q["z"], q["w"])
+def pose_of(msg: dict[str, Any]) -> Pose2D:
+    """An ``Odometry`` message's pose (m, rad)."""
+    p, q = msg["pose"]["pose"]["position"], msg["pose"]["pose"]["orientation"]
+    return Pose2D(p["x"], p["y"], 2.0 * math.atan2(q["z"], q["w"]))
 
 
-def expected_pose(odom: dict[str, Any], frame: str) -> tuple[float, float, float]:
-    """``frame`` 's pose in ``odom`` (x, y, yaw) when the robot is at ``odom`` 's pose."""
-    x, y, yaw = planar_pose(odom)
-    if frame == "odom":
-        return 0.0, 0.0, 0.0
-    if frame == "base_link":
-        return x, y, yaw
-    assert frame == "laser", frame
-    c, s = math.cos(yaw), math.sin(yaw)
-    return (x + c * MOUNT["mount_x_m"] - s * MOUNT["mount_y_m"],
-            y + s * MOUNT["mount_x_m"] + c * MOUNT["mount_y_m"], yaw + MOUNT["mount_yaw_rad"])
+def expected_pose(fixed: str, frame: str, odom: dict[str, Any],
+                  ground_truth: dict[str, Any]) -> Pose2D:
+    """``frame`` 's pose in ``fixed`` (``odom`` or ``map``), the robot being where the two
+    messages (``/odom``, ``/ground_truth``, of one instant) put it."""
+    in_odom = pose_of(odom)
+    map_odom = compose(pose_of(ground_truth), inverse(in_odom))  # what /tf carries
+    mount = Pose2D(MOUNT["mount_x_m"], MOUNT["mount_y_m"], MOUNT["mount_yaw_rad"])
+    in_odom_frame = {"odom": Pose2D(0.0, 0.0, 0.0), "base_link": in_odom,
+                     "laser": compose(in_odom, mount), "map": inverse(map_odom)}[frame]
+    return in_odom_frame if fixed == "odom" else compose(map_odom, in_odom_frame)
 
 
-def pose_of(translation: dict[str, float],
-            rotation: dict[str, float]) -> tuple[float, float, float, float, float, float]:
-    """(x, y, yaw, z, roll-pitch part x, y) of a planar transform: the last three must be 0."""
+def planar(translation: dict[str, float],
+           rotation: dict[str, float]) -> tuple[float, float, float, float, float, float]:
+    """(x, y, yaw, z, rotation x, rotation y) of a transform: planar if the last three are 0."""
     return (translation["x"], translation["y"], 2.0 * math.atan2(rotation["z"], rotation["w"]),
             translation["z"], rotation["x"], rotation["y"])
 
 
-def same_pose(got: tuple[float, ...], want: tuple[float, float, float],
-              tolerance: float = 1e-6) -> bool:
-    """Whether a planar ``pose_of`` is ``want`` (x, y, yaw; the yaw modulo a turn)."""
+def same_pose(got: tuple[float, ...], want: Pose2D, tolerance: float = 1e-6) -> bool:
+    """Whether a ``planar`` transform is ``want`` (the yaw modulo a turn), and planar."""
     x, y, yaw, *off_plane = got
-    return (abs(x - want[0]) <= tolerance and abs(y - want[1]) <= tolerance
-            and abs(math.remainder(yaw - want[2], 2 * math.pi)) <= tolerance
+    return (abs(x - want.x) <= tolerance and abs(y - want.y) <= tolerance
+            and abs(math.remainder(yaw - want.theta, 2 * math.pi)) <= tolerance
             and all(abs(value) <= tolerance for value in off_plane))
