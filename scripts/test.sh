@@ -117,6 +117,20 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 # --- end of deployment test tools -------------------------------------------------------------
 
+# --- the grader's sandbox (tests/test_sandbox.py) ---------------------------------------------
+# bubblewrap from apt when missing (nsenter, setpriv and prlimit are util-linux's, in every
+# Debian). The sandbox also needs root (each controller runs as a user of its own). Without
+# bwrap (not root), the sandbox tests are skipped ("bubblewrap (bwrap) not installed").
+if ! command -v bwrap >/dev/null; then
+    if $can_apt; then
+        apt_install "the grader's sandbox tests" bubblewrap
+    else
+        skipping "bwrap missing and not installed (not root, or no apt-get): the sandbox" \
+            "tests will be skipped"
+    fi
+fi
+# --- end of the grader's sandbox --------------------------------------------------------------
+
 # --- web interface browser tests (tests/test_page_*.py, tests/test_phone_layout.py) -----------
 # Playwright (the test extra) drives Debian's chromium; never `playwright install`, which
 # downloads a browser. From apt when missing; without it (not root) the browser tests are

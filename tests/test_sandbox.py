@@ -1,0 +1,616 @@
+"""The sandbox per submission (websim.sandbox): real bubblewrap, real processes, a real
+``websim serve`` inside the namespace, hostile controllers contained and reported."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import socket
+import sys
+import tempfile
+import textwrap
+import threading
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from websim.sandbox import (
+    INSTALL_HINT,
+    PRIVATE_HTTP_PORT,
+    PRIVATE_WS_PORT,
+    ControllerResult,
+    SandboxLimits,
+    SandboxUnavailableError,
+    SimulatorStartError,
+    SubmissionSandbox,
+)
+from websim.sandbox.identity import FIRST_UID, UID_COUNT
+from websim.sandbox.limits import CPU_KILL_GRACE_S, MIB
+from websim.sandbox.mounts import controller_environment, visible_paths
+from websim.sandbox.outcome import Observed, size_text
+from websim.sandbox.watch import SAMPLE_PERIOD_S, usage
+
+HAVE_SANDBOX = shutil.which("bwrap") is not None and os.geteuid() == 0
+needs_sandbox = pytest.mark.skipif(
+    not HAVE_SANDBOX,
+    reason="bubblewrap (bwrap) not installed, or not root (the sandbox needs both): "
+           f"{INSTALL_HINT}")
+
+ADMIN_TOKEN = "Sandbox-test-admin-token-2026"
+GENEROUS_WALL_S = 120.0
+"""Wall-clock limit of runs that should end by themselves (a loaded 2-core machine)."""
+
+
+def submission(folder: Path, code: str, **files: str) -> Path:
+    """A submission folder with ``main.py`` (``code``) and ``files``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "main.py").write_text(textwrap.dedent(code))
+    for name, text in files.items():
+        (folder / name).write_text(text)
+    return folder
+
+
+def run(folder: Path, limits: SandboxLimits | None = None,
+        env: Mapping[str, str] | None = None, **options: Any) -> ControllerResult:
+    """Run ``python3 main.py`` of ``folder`` in a sandbox without a simulator."""
+    with SubmissionSandbox(folder, limits=limits, **options) as box:
+        return box.run_controller(["python3", "main.py"], env=env)
+
+
+def serve_argv(box: SubmissionSandbox, world: str) -> list[str]:
+    return [sys.executable, "-m", "websim.cli", "serve", "--ws-port", str(box.ws_port),
+            "--http-port", str(box.http_port), "--world", world, "--admin-token", ADMIN_TOKEN]
+
+
+def server_env() -> dict[str, str]:
+    return {**os.environ, "PYTHONUNBUFFERED": "1",
+            "XDG_DATA_HOME": tempfile.mkdtemp(prefix="websim-data-")}
+
+
+def last_json(result: ControllerResult) -> Any:
+    """The JSON document a controller printed last."""
+    lines = [line for line in result.output_tail.splitlines() if line.startswith("{")]
+    assert lines, result.output_tail
+    return json.loads(lines[-1])
+
+
+# --- the network: its own simulator and nothing else -------------------------------------
+
+SIMULATOR_CLIENT = """
+    import json, os, socket, time, urllib.request
+    import roslibpy
+
+    report = {"started": time.time()}
+    url = os.environ["WEBSIM_URL"]
+    host, port = url.split("//")[1].split(":")
+    client = roslibpy.Ros(host=host, port=int(port))
+    client.run(timeout=30)
+    odom = []
+    topic = roslibpy.Topic(client, "/odom", "nav_msgs/Odometry")
+    topic.subscribe(odom.append)
+    deadline = time.time() + 30
+    while len(odom) < 3 and time.time() < deadline:
+        time.sleep(0.05)
+    report["odom"] = len(odom)
+    client.terminate()
+    with urllib.request.urlopen("http://127.0.0.1:8080/healthz", timeout=10) as answer:
+        report["world"] = json.load(answer)["world"]
+    with open("/proc/net/dev") as devices:
+        report["interfaces"] = sorted(line.split(":")[0].strip()
+                                      for line in devices.readlines()[2:])
+    report["host_port"] = {}
+    for port in map(int, os.environ.get("HOST_PORTS", "").split(",") if os.environ.get(
+            "HOST_PORTS") else []):
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=5).close()
+            report["host_port"][port] = "connected"
+        except OSError as error:
+            report["host_port"][port] = type(error).__name__
+    seen = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            seen.append(open(f"/proc/{pid}/cmdline", "rb").read().replace(b"\\0", b" ").decode())
+        except OSError:
+            pass
+    report["processes"] = seen
+    time.sleep(float(os.environ.get("HOLD_S", "0")))
+    report["ended"] = time.time()
+    print(json.dumps(report), flush=True)
+"""
+
+
+@needs_sandbox
+def test_the_controller_reaches_its_own_simulator_and_nothing_else(tmp_path: Path) -> None:
+    """A roslibpy controller gets /odom from the websim serve started inside its network
+    namespace, at WEBSIM_URL; a server on the host's 127.0.0.1 refuses it (it is not
+    there: the namespace has only its own loopback), and it sees no simulator process."""
+    folder = submission(tmp_path / "alice", SIMULATOR_CLIENT)
+    accepted: list[object] = []
+    with socket.create_server(("127.0.0.1", 0)) as host_server:
+        host_port = host_server.getsockname()[1]
+        host_server.settimeout(0.1)
+        with SubmissionSandbox(folder, limits=SandboxLimits(wall_time_s=GENEROUS_WALL_S)) as box:
+            box.start_server(serve_argv(box, "maze"), env=server_env())
+            result = box.run_controller(["python3", "main.py"],
+                                        env={"HOST_PORTS": str(host_port)})
+            server = box.stop_server()
+        with contextlib.suppress(TimeoutError):
+            accepted.append(host_server.accept())
+    assert result.ended_by == "exit" and result.exit_code == 0, result.output_tail
+    report = last_json(result)
+    assert report["odom"] >= 3
+    assert report["world"] == "maze"
+    assert report["interfaces"] == ["lo"]
+    assert report["host_port"] == {str(host_port): "ConnectionRefusedError"}
+    assert accepted == []
+    assert not any("websim" in command for command in report["processes"]), report
+    assert result.sandboxed and "bubblewrap" in result.isolation
+    assert server.exit_code == 0, server.output_tail
+    assert "websim: ready" in server.output_tail
+
+
+@needs_sandbox
+def test_two_sandboxes_run_at_once_on_the_same_ports(tmp_path: Path) -> None:
+    """Two simulators listen on 9090 and 8080 at the same time, each in its own namespace;
+    two controllers, running at once, each reach their own (worlds maze and corridor)."""
+    boxes = [SubmissionSandbox(submission(tmp_path / name, SIMULATOR_CLIENT),
+                               limits=SandboxLimits(wall_time_s=GENEROUS_WALL_S))
+             for name in ("alice", "bob")]
+    results: dict[str, ControllerResult] = {}
+    with boxes[0] as first, boxes[1] as second:
+        assert first.ws_port == second.ws_port and first.http_port == second.http_port
+        first.start_server(serve_argv(first, "maze"), env=server_env())
+        second.start_server(serve_argv(second, "corridor"), env=server_env())
+
+        def grade(name: str, box: SubmissionSandbox) -> None:
+            results[name] = box.run_controller(["python3", "main.py"], env={"HOLD_S": "3"})
+
+        threads = [threading.Thread(target=grade, args=("maze", first)),
+                   threading.Thread(target=grade, args=("corridor", second))]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+        for box in (first, second):
+            assert box.stop_server().exit_code == 0
+    reports = {name: last_json(result) for name, result in results.items()}
+    for name, report in reports.items():
+        assert results[name].exit_code == 0, results[name].output_tail
+        assert report["world"] == name
+        assert report["odom"] >= 3
+    maze, corridor = reports["maze"], reports["corridor"]
+    assert maze["started"] < corridor["ended"] and corridor["started"] < maze["ended"], \
+        "the two controllers did not run at the same time"
+
+
+RCLPY_CLIENT = """
+    import time
+    import rclpy
+    from nav_msgs.msg import Odometry
+
+    rclpy.init()
+    node = rclpy.create_node("student")
+    odom = []
+    node.create_subscription(Odometry, "/odom", odom.append, 10)
+    deadline = time.time() + 60
+    while len(odom) < 3 and time.time() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.2)
+    print("odom", len(odom), odom[-1].header.frame_id if odom else None, flush=True)
+"""
+
+
+@needs_sandbox
+def test_an_rclpy_controller_reaches_its_simulators_ros_graph(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """websim serve --ros in the namespace and an rclpy node in the sandbox find each other
+    over DDS (the grader's environment keeping discovery on LOCALHOST, as the ROS tests and
+    websim serve's default do)."""
+    pytest.importorskip("rclpy", reason="rclpy not installed (pip install .[ros])")
+    monkeypatch.setenv("ROS_DOMAIN_ID", "0")  # a namespace of its own: no other test is there
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    folder = submission(tmp_path / "alice", RCLPY_CLIENT)
+    with SubmissionSandbox(folder, limits=SandboxLimits(wall_time_s=GENEROUS_WALL_S)) as box:
+        box.start_server([*serve_argv(box, "empty"), "--ros"], env=server_env())
+        result = box.run_controller(["python3", "main.py"])
+        assert box.stop_server().exit_code == 0
+    assert result.exit_code == 0, result.output_tail
+    assert "odom 3 odom" in result.output_tail
+
+
+@needs_sandbox
+def test_a_simulator_that_does_not_start_is_reported_with_its_output(tmp_path: Path) -> None:
+    folder = submission(tmp_path / "alice", "print('never run')")
+    with SubmissionSandbox(folder) as box, pytest.raises(SimulatorStartError) as failure:
+        box.start_server([sys.executable, "-m", "websim.cli", "serve", "--world", "nowhere"],
+                         env=server_env())
+    assert "exited with code" in str(failure.value)
+    assert "nowhere" in str(failure.value)
+
+
+@needs_sandbox
+def test_the_simulator_ending_its_run_stops_the_controller(tmp_path: Path) -> None:
+    folder = submission(tmp_path / "alice", "import time; time.sleep(3600)")
+    with SubmissionSandbox(folder, limits=SandboxLimits(wall_time_s=GENEROUS_WALL_S)) as box:
+        box.start_server([sys.executable, "-c", "import time; print('ready', flush=True); "
+                          "time.sleep(1)"], ready="ready")
+        result = box.run_controller(["python3", "main.py"])
+    assert result.ended_by == "server_exit"
+    assert result.reason == "stopped when its simulator's run ended"
+
+
+# --- files: its own copy, nothing of anyone else's ---------------------------------------
+
+PRYING = """
+    import json, os
+    report = {}
+    def attempt(name, action):
+        try:
+            report[name] = repr(action())
+        except OSError as error:
+            report[name] = type(error).__name__
+    for name, path in json.loads(os.environ["READ"]).items():
+        attempt("read " + name, lambda: open(path).read())
+    for name, path in json.loads(os.environ["LIST"]).items():
+        attempt("list " + name, lambda: sorted(os.listdir(path)))
+    for name, path in json.loads(os.environ["WRITE"]).items():
+        attempt("write " + name, lambda: open(path, "w").write("mine"))
+    report["env"] = sorted(os.environ)
+    report["uid"] = os.getuid()
+    report["cwd"] = os.getcwd()
+    print(json.dumps(report), flush=True)
+"""
+
+
+@needs_sandbox
+def test_a_submission_reads_and_writes_nothing_but_its_copy(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Another student's folder, the instructor's token, the grade output (where the
+    recording goes), the system, /root and /proc of others: absent or refused; its own copy
+    and its private /tmp: writable, without touching the original or the host's /tmp."""
+    submissions = tmp_path / "submissions"
+    bob = submission(submissions / "bob", "print('bob')", **{"secret.txt": "bob's answer"})
+    token = tmp_path / "instructor" / "token.txt"
+    token.parent.mkdir()
+    token.write_text("instructor-token")
+    grade_out = tmp_path / "grade-out" / "alice"
+    grade_out.mkdir(parents=True)
+    (grade_out / "recording.mcap").write_text("the recording")
+    course = tmp_path / "course"  # made visible (a shared library), with a private folder in it
+    (course / "private").mkdir(parents=True)
+    (course / "shared.txt").write_text("for everyone")
+    (course / "private" / "key.txt").write_text("course key")
+    marker = f"websim-sandbox-test-{os.getpid()}"
+    monkeypatch.setenv("INSTRUCTOR_TOKEN", "instructor-token")
+    alice = submission(submissions / "alice", PRYING, **{"notes.txt": "alice's notes"})
+    env = {
+        "READ": json.dumps({
+            "bob": str(bob / "secret.txt"), "token": str(token), "own": "notes.txt",
+            "recording": str(grade_out / "recording.mcap"), "shadow": "/etc/shadow",
+            "init environ": "/proc/1/environ", "course": str(course / "shared.txt"),
+            "course private": str(course / "private" / "key.txt")}),
+        "LIST": json.dumps({"submissions": str(submissions), "root": "/root",
+                            "home": "/home", "var": "/var"}),
+        "WRITE": json.dumps({
+            "own": "output.txt", "tmp": f"/tmp/{marker}", "handed in": "/submission/x.txt",
+            "recording": str(grade_out / "recording.mcap"), "usr": "/usr/websim-sandbox",
+            "etc": "/etc/websim-sandbox", "python": f"{sys.prefix}/websim-sandbox",
+            "bob": str(bob / "secret.txt")}),
+    }
+    result = run(alice, env=env, visible_paths=[course], hidden_paths=[course / "private",
+                                                                       submissions, grade_out])
+    assert result.exit_code == 0, result.output_tail
+    report = last_json(result)
+    for name in ("bob", "token", "recording"):
+        assert report[f"read {name}"] == "FileNotFoundError", name
+    assert report["read own"] == repr("alice's notes")
+    assert report["read course"] == repr("for everyone")
+    assert report["read course private"] == "PermissionError"
+    assert report["read shadow"] == "PermissionError"
+    assert report["read init environ"] == "PermissionError"
+    assert report["list submissions"] == "FileNotFoundError"
+    assert report["list home"] == "['student']"  # its own, not the machine's /home
+    assert report["list var"] == "FileNotFoundError"
+    python_in_root = sorted({Path(path).parts[2] for path in visible_paths([])
+                             if path.startswith("/root/")})
+    assert report["list root"] == repr(python_in_root)  # only the Python that runs websim
+    assert report["write own"] == "4" and report["write tmp"] == "4"
+    for name in ("usr", "etc", "python"):
+        assert report[f"write {name}"] in ("OSError", "PermissionError"), name
+    for name in ("recording", "bob"):
+        assert report[f"write {name}"] == "FileNotFoundError", name
+    assert report["write handed in"] == "OSError"  # read-only: the copy home is writable
+    assert report["uid"] >= 60000 and report["cwd"] == "/home/student"
+    assert "INSTRUCTOR_TOKEN" not in report["env"]
+    assert set(report["env"]) >= {"WEBSIM_URL", "READ", "PATH", "HOME"}
+    # nothing escaped: the original folders, the recording and the host's /tmp unchanged
+    assert sorted(path.name for path in alice.iterdir()) == ["main.py", "notes.txt"]
+    assert (bob / "secret.txt").read_text() == "bob's answer"
+    assert (grade_out / "recording.mcap").read_text() == "the recording"
+    assert not (Path(tempfile.gettempdir()) / marker).exists()
+
+
+def test_the_controller_environment_is_cleared_to_what_it_needs() -> None:
+    grader = {"PATH": f"{sys.prefix}/bin:/root/.cargo/bin:/usr/bin", "HOME": "/root",
+              "INSTRUCTOR_TOKEN": "secret", "ROS_DOMAIN_ID": "7",
+              "PYTHONPATH": f"/work/checkout:{sys.prefix}/lib/extra"}
+    env = controller_environment({"WEBSIM_SETPOINT_RAD": "1.5"}, home="/home/student",
+                                 visible=visible_paths([]), sandboxed=True, grader_env=grader)
+    assert env["PATH"] == f"{os.path.realpath(sys.prefix)}/bin:/usr/bin" or \
+        env["PATH"] == f"{sys.prefix}/bin:/usr/bin"
+    assert env["HOME"] == "/home/student" and env["WEBSIM_SETPOINT_RAD"] == "1.5"
+    assert env["ROS_DOMAIN_ID"] == "7"
+    assert "INSTRUCTOR_TOKEN" not in env
+    assert env["PYTHONPATH"] == f"{sys.prefix}/lib/extra"  # the checkout's entry dropped
+    with pytest.raises(ValueError, match="invalid environment variable"):
+        controller_environment({"A=B": "1"}, home="/h", visible=(), sandboxed=True)
+
+
+def test_visible_paths_are_absolute_existing_and_never_the_whole_system(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="whole file system"):
+        visible_paths(["/"])
+    with pytest.raises(ValueError, match="absolute"):
+        visible_paths(["relative/folder"])
+    with pytest.raises(ValueError, match="does not exist"):
+        visible_paths([str(tmp_path / "missing")])
+    (tmp_path / "outer" / "inner").mkdir(parents=True)
+    paths = visible_paths([tmp_path / "outer" / "inner", tmp_path / "outer", "/usr/share"])
+    assert str(tmp_path / "outer") in paths
+    assert str(tmp_path / "outer" / "inner") not in paths and "/usr/share" not in paths
+
+
+# --- limits ------------------------------------------------------------------------------
+
+@needs_sandbox
+def test_a_fork_bomb_is_held_at_the_process_limit_and_cleaned_up(tmp_path: Path) -> None:
+    """A fork bomb that retries reaches the process limit and no further; the wall-clock
+    limit ends it, and no process of its user is left on the machine."""
+    folder = submission(tmp_path / "bomb", """
+        import os, time
+        while True:
+            try:
+                os.fork()
+            except OSError:
+                time.sleep(0.01)
+    """)
+    limits = SandboxLimits(processes=32, wall_time_s=5.0)
+    with SubmissionSandbox(folder, limits=limits) as box:
+        result = box.run_controller(["python3", "main.py"])
+        assert box.uid is not None and usage(uid=box.uid).pids == ()
+    assert result.ended_by == "wall_time"
+    assert "processes" in result.limits_hit
+    assert result.peak_tasks is not None and result.peak_tasks <= limits.processes
+    assert "the process limit (32 processes and threads)" in result.reason
+
+
+@needs_sandbox
+def test_a_shell_fork_bomb_is_contained(tmp_path: Path) -> None:
+    folder = submission(tmp_path / "bomb", "")
+    limits = SandboxLimits(processes=40, wall_time_s=4.0)
+    with SubmissionSandbox(folder, limits=limits) as box:
+        result = box.run_controller(["bash", "-c", "bomb() { bomb | bomb & }; bomb; wait"])
+    assert result.ended_by in ("wall_time", "exit")
+    assert "processes" in result.limits_hit
+    assert result.peak_tasks is not None and result.peak_tasks <= limits.processes
+
+
+@needs_sandbox
+def test_allocating_8_gb_fails_and_is_reported(tmp_path: Path) -> None:
+    folder = submission(tmp_path / "greedy", "block = bytearray(8 * 1024 ** 3)")
+    result = run(folder, SandboxLimits(wall_time_s=GENEROUS_WALL_S))
+    assert result.ended_by == "exit" and result.exit_code == 1
+    assert "MemoryError" in result.output_tail
+    assert "memory" in result.limits_hit
+    assert result.reason == "exited with code 1; reached the memory limit (4 GiB)"
+
+
+@needs_sandbox
+def test_processes_over_the_memory_limit_together_are_stopped(tmp_path: Path) -> None:
+    """Four processes of 100 MiB each, every one within its address-space limit, hold more
+    than the 256 MiB all of them may: the sampled sum stops the run."""
+    folder = submission(tmp_path / "greedy", """
+        import os, time
+        for _ in range(3):
+            if os.fork() == 0:
+                break
+        block = b"\\1" * (100 * 1024 * 1024)
+        time.sleep(3600)
+    """)
+    result = run(folder, SandboxLimits(memory_bytes=256 * MIB, wall_time_s=GENEROUS_WALL_S))
+    assert result.ended_by == "memory"
+    assert result.peak_memory_bytes is not None and result.peak_memory_bytes > 256 * MIB
+    assert result.reason.startswith("stopped: its processes held ")
+    assert "over the memory limit (256 MiB)" in result.reason
+
+
+@needs_sandbox
+def test_100_mb_of_output_is_truncated_to_its_tail(tmp_path: Path) -> None:
+    folder = submission(tmp_path / "loud", """
+        import sys
+        line = b"x" * 1023 + b"\\n"
+        for _ in range(100 * 1024 - 1):
+            sys.stdout.buffer.write(line)
+        sys.stdout.buffer.write(b"the end".ljust(1023, b".") + b"\\n")
+    """)
+    limits = SandboxLimits(wall_time_s=GENEROUS_WALL_S)
+    result = run(folder, limits)
+    assert result.exit_code == 0
+    assert result.output_bytes == 100 * MIB
+    assert result.output_truncated and "output" in result.limits_hit
+    assert len(result.output_tail) == limits.output_tail_bytes
+    assert result.output_tail.rstrip().endswith("the end" + "." * 1016)
+    assert "the last 64 KiB of 100 MiB kept" in result.reason
+
+
+@needs_sandbox
+def test_a_hanging_controller_is_stopped_at_the_wall_clock_limit(tmp_path: Path) -> None:
+    """It and the daemon it left in a session of its own are killed; the reason says so."""
+    folder = submission(tmp_path / "hang", """
+        import os, time
+        if os.fork() == 0:
+            os.setsid()
+            if os.fork() == 0:
+                time.sleep(3600)
+            os._exit(0)
+        print("waiting forever", flush=True)
+        time.sleep(3600)
+    """)
+    with SubmissionSandbox(folder, limits=SandboxLimits(wall_time_s=2.0)) as box:
+        result = box.run_controller(["python3", "main.py"])
+        assert box.uid is not None and usage(uid=box.uid).pids == ()
+    assert result.ended_by == "wall_time"
+    assert 2.0 <= result.wall_time_s < 60.0
+    (folder / "main.py").write_text(textwrap.dedent("""
+        import os, time
+        if os.fork() == 0:
+            os.setsid()
+            time.sleep(3600)
+        print("leaving a daemon", flush=True)
+    """))
+    with SubmissionSandbox(folder, limits=SandboxLimits(wall_time_s=GENEROUS_WALL_S)) as box:
+        left = box.run_controller(["python3", "main.py"])
+        assert left.exit_code == 0 and "leaving a daemon" in left.output_tail
+        assert box.uid is not None and usage(uid=box.uid).pids == ()
+    assert result.reason == "stopped at the wall-clock limit (2 s)"
+    assert "waiting forever" in result.output_tail
+
+
+@needs_sandbox
+def test_cpu_time_and_file_size_limits_are_reported(tmp_path: Path) -> None:
+    spin = submission(tmp_path / "spin", "while True: pass")
+    result = run(spin, SandboxLimits(cpu_time_s=1, wall_time_s=GENEROUS_WALL_S))
+    assert result.signal == "SIGXCPU" and "cpu_time" in result.limits_hit
+    assert result.reason == "killed by SIGXCPU; reached the CPU-time limit (1 s per process)"
+    big = submission(tmp_path / "big", "open('big.bin', 'wb').write(b'x' * 2 * 1024 * 1024)")
+    result = run(big, SandboxLimits(file_size_bytes=MIB, wall_time_s=GENEROUS_WALL_S))
+    assert result.exit_code == 1 and "File too large" in result.output_tail
+    assert "file_size" in result.limits_hit
+
+
+@needs_sandbox
+def test_what_a_controller_writes_is_bounded_in_all(tmp_path: Path) -> None:
+    """Files within the file-size limit, but more of them than its home holds: the home
+    fills, not the machine's disk; a submission larger than the home does not start."""
+    folder = submission(tmp_path / "writer", """
+        for index in range(8):
+            with open(f"part{index}.bin", "wb") as part:
+                part.write(b"x" * 1024 * 1024)
+    """)
+    limits = SandboxLimits(home_bytes=4 * MIB, wall_time_s=GENEROUS_WALL_S)
+    result = run(folder, limits)
+    assert result.exit_code == 1 and "No space left on device" in result.output_tail
+    assert result.limits_hit == ("disk",)
+    assert "the disk limit (4 MiB for its home, 64 MiB for /tmp)" in result.reason
+    (folder / "data.bin").write_bytes(b"x" * 5 * MIB)
+    result = run(folder, limits)
+    assert result.exit_code == 1 and "cp: " in result.output_tail
+    assert result.limits_hit == ("disk",)
+
+
+# --- without bubblewrap -----------------------------------------------------------------
+
+def test_without_bubblewrap_the_sandbox_refuses_with_the_install_hint(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A PATH without bwrap (prlimit only): refused with the hint, unless no_sandbox, whose
+    run is recorded as unsandboxed and still stopped at its wall-clock limit with its
+    whole process group."""
+    tools = tmp_path / "bin"
+    tools.mkdir()
+    prlimit = shutil.which("prlimit")
+    assert prlimit is not None, "prlimit (util-linux) is part of every Debian"
+    (tools / "prlimit").symlink_to(prlimit)
+    folder = submission(tmp_path / "alice", """
+        import os, subprocess, sys, time
+        subprocess.Popen([sys.executable, "-c", "import time; time.sleep(3600)"])
+        print("pid", os.getpid(), flush=True)
+        time.sleep(3600)
+    """)
+    monkeypatch.setenv("PATH", f"{tools}:{os.path.dirname(sys.executable)}")
+    with pytest.raises(SandboxUnavailableError) as refusal:
+        SubmissionSandbox(folder)
+    assert "apt-get install bubblewrap" in str(refusal.value)
+    assert "--no-sandbox" in str(refusal.value)
+    with SubmissionSandbox(folder, no_sandbox=True,
+                           limits=SandboxLimits(wall_time_s=3.0)) as box:
+        assert box.ws_port != box.http_port
+        result = box.run_controller([sys.executable, "main.py"])
+    assert not result.sandboxed
+    assert result.isolation.startswith("none (--no-sandbox)")
+    assert result.reason == "stopped at the wall-clock limit (3 s) (ran without a sandbox)"
+    session = int(result.output_tail.split("pid ")[1].split()[0])
+    assert usage(session=session).pids == ()
+
+
+# --- the results, from what was observed -------------------------------------------------
+
+def observed(**fields: Any) -> Observed:
+    defaults: dict[str, Any] = dict(exit_status=0, by_signal_code=True, stopped_by=None,
+                                    wall_time_s=1.0, peak_tasks=1, peak_memory_bytes=MIB,
+                                    output_tail=b"", output_bytes=0)
+    return Observed(**{**defaults, **fields})
+
+
+def result_of(sandboxed: bool = True, **fields: Any) -> ControllerResult:
+    return ControllerResult.build(observed(**fields), sandboxed=sandboxed, isolation="test",
+                                  command=("python3", "main.py"), limits=SandboxLimits())
+
+
+def test_results_decode_signals_as_bubblewrap_and_subprocess_report_them() -> None:
+    killed = result_of(exit_status=137)
+    assert (killed.ended_by, killed.signal, killed.exit_code) == ("signal", "SIGKILL", None)
+    assert killed.reason == "killed by SIGKILL"
+    unsandboxed = result_of(sandboxed=False, by_signal_code=False, exit_status=-9)
+    assert unsandboxed.signal == "SIGKILL"
+    assert unsandboxed.reason == "killed by SIGKILL (ran without a sandbox)"
+    plain = result_of(sandboxed=False, by_signal_code=False, exit_status=200)
+    assert (plain.exit_code, plain.signal) == (200, None)
+    assert result_of(exit_status=0).reason == "exited with code 0"
+    assert result_of(exit_status=None, stopped_by="wall_time").limits_hit == ("wall_time",)
+
+
+def test_results_name_the_limits_a_controller_reached() -> None:
+    bomb = result_of(exit_status=1, peak_tasks=128,
+                     output_tail=b"BlockingIOError: [Errno 11] Resource temporarily unavailable")
+    assert bomb.limits_hit == ("processes",)
+    assert bomb.reason == ("exited with code 1; reached the process limit (128 processes and "
+                           "threads)")
+    files = result_of(exit_status=1, output_tail=b"OSError: [Errno 24] Too many open files")
+    assert files.limits_hit == ("open_files",)
+    assert result_of(exit_status=128 + 25).limits_hit == ("file_size",)  # SIGXFSZ
+    assert result_of(exit_status=0, output_bytes=65 * 1024).limits_hit == ("output",)
+    assert result_of(exit_status=0).limits_hit == ()
+
+
+def test_the_docs_state_the_limits_in_force() -> None:
+    """docs/grading.md's table of limits and the figures around it are the code's."""
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "grading.md").read_text()
+    limits = SandboxLimits()
+    rows = {
+        "wall_time_s": f"{limits.wall_time_s:g} s",
+        "cpu_time_s": f"{limits.cpu_time_s} s per process",
+        "memory_bytes": size_text(limits.memory_bytes),
+        "processes": f"{limits.processes} processes and threads",
+        "open_files": f"{limits.open_files} per process",
+        "file_size_bytes": f"{size_text(limits.file_size_bytes)} per file",
+        "home_bytes": size_text(limits.home_bytes),
+        "tmp_bytes": f"{size_text(limits.tmp_bytes)} each",
+        "output_tail_bytes": size_text(limits.output_tail_bytes),
+    }
+    for name, default in rows.items():
+        assert f"| `{name}` | {default} |" in doc, name
+    assert f"SIGKILL {CPU_KILL_GRACE_S} s later" in doc
+    assert f"sampled every {SAMPLE_PERIOD_S:g} s" in doc
+    assert f"ids {FIRST_UID}-{FIRST_UID + UID_COUNT - 1}" in doc
+    assert f"same ports inside ({PRIVATE_WS_PORT}, {PRIVATE_HTTP_PORT})" in doc
+
+
+def test_limits_refuse_nonsense() -> None:
+    with pytest.raises(ValueError, match="wall_time_s"):
+        SandboxLimits(wall_time_s=0)
+    with pytest.raises(ValueError, match="processes"):
+        SandboxLimits(processes=0)
+    with pytest.raises(ValueError, match="open_files must be at least 16"):
+        SandboxLimits(open_files=3)

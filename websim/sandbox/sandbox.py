@@ -1,0 +1,495 @@
+"""One submission's sandbox: its private simulator, its controller, and how the run ended."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import signal
+import socket
+import stat
+import subprocess
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from types import TracebackType
+
+from websim.sandbox.identity import SandboxUnavailableError, UidLease, account_files
+from websim.sandbox.limits import SandboxLimits, prlimit_arguments
+from websim.sandbox.mounts import (
+    DEFAULT_PATH,
+    HOME_DIR,
+    bwrap_options,
+    command_in_home,
+    controller_environment,
+)
+from websim.sandbox.mounts import visible_paths as outermost_visible_paths
+from websim.sandbox.outcome import ControllerResult, Observed, ServerOutcome
+from websim.sandbox.watch import SAMPLE_PERIOD_S, OutputTail, kill_all, usage
+
+INSTALL_HINT = "apt-get install bubblewrap"
+
+READY_TEXT = "websim: ready"
+"""What ``websim serve`` prints once it listens (``start_server``'s default)."""
+
+PRIVATE_WS_PORT = 9090
+PRIVATE_HTTP_PORT = 8080
+"""The simulator's ports inside a sandbox: the same in every one (each has its own network),
+and websim's defaults, so a controller written for ``websim serve`` finds them."""
+
+SERVER_READY_TIMEOUT_S = 60.0
+SERVER_STOP_TIMEOUT_S = 10.0
+"""How long the simulator may take to start (a loaded machine, a cold import), and to stop
+on SIGTERM (writing its recording's end) before it is killed."""
+
+OUTPUT_DRAIN_S = 5.0
+"""How long the last output may take to arrive once a process has ended."""
+
+SERVER_OUTPUT_TAIL_BYTES = 64 * 1024
+
+SANDBOXED_SERVER_DDS = {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4",
+                        "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}
+"""The sandboxed simulator's DDS (``--ros``): over UDP only, discovering over its namespace's
+network (its loopback: nothing else is there). Fast DDS would otherwise send to an rclpy
+controller it takes for a neighbour through shared memory, which the two do not share
+(each has a private ``/dev/shm``), and nothing would arrive; with discovery on LOCALHOST
+(websim serve's default) it uses shared memory whatever FASTDDS_BUILTIN_TRANSPORTS says.
+A controller's own settings do not matter: it talks to a simulator that speaks only UDP."""
+
+
+class SimulatorStartError(RuntimeError):
+    """The private simulator did not start (the grader's fault, not the submission's)."""
+
+
+def find_tools(*, sandboxed: bool, bwrap: str | None = None) -> dict[str, str]:
+    """The programs the sandbox runs, by name, as paths.
+
+    Args:
+        sandboxed: the sandbox is wanted (else only ``prlimit`` is).
+        bwrap: bubblewrap's path (default: ``bwrap`` on ``PATH``).
+
+    Raises:
+        SandboxUnavailableError: one is missing, or the sandbox is wanted without root; the
+            message says how to get it, or ``--no-sandbox``.
+    """
+    tools: dict[str, str] = {}
+    if sandboxed:
+        found = bwrap or shutil.which("bwrap")
+        if found is None or not os.access(found, os.X_OK):
+            raise SandboxUnavailableError(
+                "bubblewrap (bwrap) is not installed, so submissions cannot be sandboxed: "
+                f"install it ({INSTALL_HINT}), or grade without a sandbox (--no-sandbox; "
+                "only for code you trust)")
+        tools["bwrap"] = found
+    for name in ("prlimit", "setpriv", "nsenter") if sandboxed else ("prlimit",):
+        found = shutil.which(name)
+        if found is None:
+            raise SandboxUnavailableError(
+                f"{name} is not installed (it is part of util-linux: apt-get install "
+                "util-linux)")
+        tools[name] = found
+    if sandboxed and os.geteuid() != 0:
+        raise SandboxUnavailableError(
+            "the sandbox needs root: it runs each controller as a user of its own, in "
+            "namespaces only root may join (run websim grade as root, as in a container or "
+            "a CI runner; or grade without a sandbox with --no-sandbox, only for code you "
+            "trust)")
+    return tools
+
+
+class SubmissionSandbox:
+    """One submission's sandbox: a private simulator and the controller, isolated together.
+
+    Use as a context manager; then ``start_server`` (the private ``websim serve``), then
+    ``run_controller`` (which returns how it ended), then ``stop_server``. See the
+    package's docstring for what it isolates and how.
+    """
+
+    def __init__(self, submission_dir: str | os.PathLike[str], *,
+                 limits: SandboxLimits | None = None,
+                 visible_paths: Sequence[str | os.PathLike[str]] = (),
+                 hidden_paths: Sequence[str | os.PathLike[str]] = (),
+                 no_sandbox: bool = False, bwrap: str | None = None) -> None:
+        """Check that the sandbox can run here (nothing runs until ``__enter__``).
+
+        Args:
+            submission_dir: the student's folder; the controller gets a writable copy.
+            limits: the controller's limits (default ``SandboxLimits()``).
+            visible_paths: absolute paths the controller may read besides the system and
+                the Python that runs websim (a ``node_modules`` the course provides).
+            hidden_paths: the grader's private paths (the grade output, the submissions'
+                folder, the scenarios): covered if they lie inside a visible path.
+            no_sandbox: run the controller without isolation, as the grader's user on the
+                grader's network (``--no-sandbox``; results say so).
+            bwrap: bubblewrap's path (default: ``bwrap`` on ``PATH``).
+
+        Raises:
+            SandboxUnavailableError: bubblewrap or root is missing (and not ``no_sandbox``).
+            ValueError: the submission folder or a visible path does not exist.
+        """
+        self.submission_dir = Path(submission_dir).resolve()
+        if not self.submission_dir.is_dir():
+            raise ValueError(f"the submission is not a folder: {self.submission_dir}")
+        self.limits = limits or SandboxLimits()
+        self.sandboxed = not no_sandbox
+        self._tools = find_tools(sandboxed=self.sandboxed, bwrap=bwrap)
+        self._visible = outermost_visible_paths(visible_paths) if self.sandboxed else ()
+        self._hidden = (*(os.fspath(path) for path in hidden_paths), str(self.submission_dir))
+        self._workspace: Path | None = None
+        self._lease: UidLease | None = None
+        self._accounts: tuple[Path, Path] | None = None
+        self._server: subprocess.Popen[bytes] | None = None
+        self._server_output: OutputTail | None = None
+        self._server_pidfd: int | None = None
+        self._netns_fd: int | None = None
+        self.ws_port, self.http_port = PRIVATE_WS_PORT, PRIVATE_HTTP_PORT
+
+    # --- lifetime ---------------------------------------------------------------------
+
+    def __enter__(self) -> SubmissionSandbox:
+        """Copy the submission and, in the sandbox, take a user for it."""
+        self._workspace = Path(tempfile.mkdtemp(prefix="websim-sandbox-"))
+        try:
+            copy_submission(self.submission_dir, self.submission_copy)
+            if self.sandboxed:
+                self._lease = UidLease()
+                own_tree(self.submission_copy, self._lease.uid)
+                self._accounts = account_files(self._lease.uid, HOME_DIR, self._workspace)
+            else:
+                self.ws_port = self.http_port = free_port()
+                while self.http_port == self.ws_port:
+                    self.http_port = free_port()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 trace: TracebackType | None) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop the simulator, give the user back, delete the copy (idempotent)."""
+        self.stop_server()
+        if self._lease is not None:
+            self._lease.release()
+            self._lease = None
+        if self._workspace is not None:
+            shutil.rmtree(self._workspace, ignore_errors=True)
+            self._workspace = None
+
+    @property
+    def submission_copy(self) -> Path:
+        """The copy of the submission on this machine.
+
+        In the sandbox, its user's, read-only at ``/submission`` inside and copied to its
+        home; without the sandbox, where the controller runs.
+        """
+        if self._workspace is None:
+            raise RuntimeError("the sandbox is not open: use it in a with block")
+        return self._workspace / "submission"
+
+    @property
+    def uid(self) -> int | None:
+        """The user the controller runs as (None without the sandbox, or before it opens)."""
+        return None if self._lease is None else self._lease.uid
+
+    @property
+    def websim_url(self) -> str:
+        """The simulator's WebSocket address, as the controller reaches it."""
+        return f"ws://127.0.0.1:{self.ws_port}"
+
+    @property
+    def isolation(self) -> str:
+        """One line: what isolates the controller (for reports)."""
+        if not self.sandboxed:
+            return ("none (--no-sandbox): the controller ran as the grader's user, with the "
+                    "grader's files and network")
+        network = ("its own network namespace, shared with its simulator"
+                   if self._netns_fd is not None else "its own network namespace")
+        return (f"bubblewrap: user {self.uid}; {network} (loopback only); its own process, IPC "
+                "and host-name namespaces; the system read-only; writable only its home (a "
+                "copy of the submission), /tmp and /dev/shm, each of bounded size")
+
+    # --- the simulator ----------------------------------------------------------------
+
+    def start_server(self, argv: Sequence[str], *, env: Mapping[str, str] | None = None,
+                     ready: str = READY_TEXT,
+                     timeout_s: float = SERVER_READY_TIMEOUT_S) -> None:
+        """Start the private simulator and wait until it prints ``ready``.
+
+        In the sandbox it runs in a network namespace of its own (bwrap ``--unshare-net``:
+        only a loopback), with this machine's files as they are (it is the grader's code,
+        writing the recording where the grader says) but a private ``/dev/shm``, as root
+        without capabilities, its DDS set to reach the controller
+        (``SANDBOXED_SERVER_DDS``); the controller joins that namespace. It should listen
+        on ``ws_port`` and ``http_port``.
+
+        Args:
+            argv: its command (``python -m websim.cli serve --ws-port ...``).
+            env: its environment (default: the grader's).
+            ready: a text it prints once it listens.
+            timeout_s: how long it may take.
+
+        Raises:
+            SimulatorStartError: it exited or did not print ``ready`` in time (with its output).
+        """
+        if self._workspace is None:
+            raise RuntimeError("the sandbox is not open: use it in a with block")
+        if self._server is not None:
+            raise RuntimeError("this sandbox's simulator is already running")
+        server_env = dict(os.environ if env is None else env)
+        if self.sandboxed:
+            server_env.pop("ROS_LOCALHOST_ONLY", None)
+            server_env.update(SANDBOXED_SERVER_DDS)
+            info_read, info_write = os.pipe()
+            command = [self._tools["bwrap"], "--dev-bind", "/", "/", "--unshare-net",
+                       "--tmpfs", "/dev/shm", "--die-with-parent", "--info-fd",
+                       str(info_write), "--", *argv]
+            try:
+                self._server = subprocess.Popen(
+                    command, pass_fds=(info_write,), stdin=subprocess.DEVNULL,
+                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=server_env,
+                    start_new_session=True)
+            finally:
+                os.close(info_write)
+            self._server_output = self._read_server_output(ready)
+            with os.fdopen(info_read, "rb") as info_file:
+                info_text = info_file.read()  # bwrap closes it once the namespace exists
+            if info_text:
+                self._join_namespace(json.loads(info_text))
+        else:
+            self._server = subprocess.Popen(
+                list(argv), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT, env=server_env, start_new_session=True)
+            self._server_output = self._read_server_output(ready)
+        deadline = time.monotonic() + timeout_s
+        output = self._server_output
+        while not output.ready.wait(SAMPLE_PERIOD_S):
+            exited = self._server.poll() is not None
+            if exited or time.monotonic() > deadline:
+                outcome = self.stop_server()
+                why = (f"exited with code {outcome.exit_code}" if exited
+                       else f"did not print {ready!r} within {timeout_s:g} s")
+                raise SimulatorStartError(f"the simulator {why} ({' '.join(argv)}); its output "
+                                      f"ended with:\n{outcome.output_tail}")
+
+    def _read_server_output(self, ready: str) -> OutputTail:
+        assert self._server is not None and self._server.stdout is not None
+        return OutputTail(self._server.stdout, SERVER_OUTPUT_TAIL_BYTES, ready=ready,
+                          name="websim-sandbox-server")
+
+    def _join_namespace(self, info: Mapping[str, int]) -> None:
+        """Hold the simulator's process and network namespace by file descriptors.
+
+        Descriptors are immune to its pid being reused once it has gone.
+        """
+        pid = info["child-pid"]
+        self._server_pidfd = os.pidfd_open(pid)
+        netns_fd = os.open(f"/proc/{pid}/ns/net", os.O_RDONLY | os.O_CLOEXEC)
+        if os.fstat(netns_fd).st_ino != info["net-namespace"]:
+            os.close(netns_fd)  # the pid was reused before this opened it: not its namespace
+            raise SimulatorStartError("the simulator's process ended before its network "
+                                  "namespace could be joined")
+        self._netns_fd = netns_fd
+
+    def stop_server(self, *, timeout_s: float = SERVER_STOP_TIMEOUT_S) -> ServerOutcome:
+        """Stop the simulator (SIGTERM, then SIGKILL after ``timeout_s``); how it ended.
+
+        Idempotent: without a simulator, an outcome with no exit code.
+        """
+        server, output = self._server, self._server_output
+        if server is None or output is None:
+            return ServerOutcome(None, "")
+        if server.poll() is None:
+            try:
+                if self._server_pidfd is not None:
+                    signal.pidfd_send_signal(self._server_pidfd, signal.SIGTERM)
+                else:
+                    server.send_signal(signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+            try:
+                server.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                _kill_group(server.pid)
+                server.wait()
+        if not self.sandboxed:
+            _kill_group(server.pid)  # what it left behind in its group
+        output.join(OUTPUT_DRAIN_S)
+        for fd in (self._server_pidfd, self._netns_fd):
+            if fd is not None:
+                os.close(fd)
+        self._server = self._server_output = None
+        self._server_pidfd = self._netns_fd = None
+        return ServerOutcome(server.returncode,
+                             output.tail.decode("utf-8", errors="replace"))
+
+    # --- the controller ---------------------------------------------------------------
+
+    def run_controller(self, command: Sequence[str], *,
+                       env: Mapping[str, str] | None = None) -> ControllerResult:
+        """Run the student's controller; how it ended.
+
+        It runs until it exits, a limit stops it, or its simulator exits.
+
+        Args:
+            command: its command, run in its copy of the submission (``python3 main.py``).
+            env: its variables (``WEBSIM_<NAME>``, a ROS domain...), over the few it gets
+                (``mounts.controller_environment``); ``WEBSIM_URL`` defaults to
+                ``websim_url``.
+        """
+        if self._workspace is None:
+            raise RuntimeError("the sandbox is not open: use it in a with block")
+        if not command:
+            raise ValueError("the controller's command is empty")
+        run_env = {"WEBSIM_URL": self.websim_url, **(env or {})}
+        limits = self.limits
+        home = HOME_DIR if self.sandboxed else str(self.submission_copy)
+        full_env = controller_environment(run_env, home=home, visible=self._visible,
+                                          sandboxed=self.sandboxed)
+        prlimit = [self._tools["prlimit"],
+                   *prlimit_arguments(limits, processes=self.sandboxed), "--"]
+        pass_fds: list[int] = []
+        if self.sandboxed:
+            assert self._lease is not None and self._accounts is not None
+            uid = self._lease.uid
+            options = bwrap_options(visible=self._visible, hidden=self._hidden,
+                                    submission_copy=self.submission_copy,
+                                    accounts=self._accounts, limits=limits, env=full_env,
+                                    own_network=self._netns_fd is None)
+            args_file = self._workspace / "bwrap-args"
+            args_file.write_bytes(b"".join(option.encode() + b"\0" for option in options))
+            args_fd = os.open(args_file, os.O_RDONLY)
+            pass_fds.append(args_fd)
+            argv = [*prlimit, self._tools["bwrap"], "--args", str(args_fd), "--",
+                    self._tools["setpriv"], f"--reuid={uid}", f"--regid={uid}",
+                    "--clear-groups", "--inh-caps=-all", "--bounding-set=-all", "--",
+                    *command_in_home(command)]
+            if self._netns_fd is not None:
+                pass_fds.append(self._netns_fd)
+                argv = [self._tools["nsenter"], f"--net=/proc/self/fd/{self._netns_fd}", "--",
+                        *argv]
+            popen_env, cwd = {"PATH": DEFAULT_PATH}, str(self._workspace)
+            match: dict[str, int] = {"uid": uid}
+        else:
+            argv, popen_env, cwd = [*prlimit, *command], full_env, str(self.submission_copy)
+        started = time.monotonic()
+        try:
+            process = subprocess.Popen(
+                argv, pass_fds=pass_fds, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT, env=popen_env, cwd=cwd, start_new_session=True)
+        finally:
+            for fd in pass_fds:
+                if fd != self._netns_fd:
+                    os.close(fd)
+        if not self.sandboxed:
+            match = {"session": process.pid}
+        assert process.stdout is not None
+        output = OutputTail(process.stdout, limits.output_tail_bytes,
+                            name="websim-sandbox-controller")
+        try:
+            observed = self._watch(process, output, match, started)
+        except BaseException:  # interrupted (Ctrl+C): leave nothing running
+            if process.returncode is None:
+                self._stop_controller(process, match)
+                process.wait()
+            raise
+        return ControllerResult.build(observed, sandboxed=self.sandboxed,
+                                      isolation=self.isolation, command=tuple(command),
+                                      limits=limits)
+
+    def _watch(self, process: subprocess.Popen[bytes], output: OutputTail,
+               match: Mapping[str, int], started: float) -> Observed:
+        """Wait for the controller, sampling its processes; stop it if it must stop."""
+        limits = self.limits
+        deadline = started + limits.wall_time_s
+        peak_tasks = peak_memory = 0
+        stopped_by: str | None = None
+        while True:
+            pid, status = os.waitpid(process.pid, os.WNOHANG)
+            if pid:
+                break
+            now = usage(**match)
+            peak_tasks, peak_memory = max(peak_tasks, now.tasks), max(peak_memory,
+                                                                       now.rss_bytes)
+            if now.rss_bytes > limits.memory_bytes:
+                stopped_by = "memory"
+            elif time.monotonic() >= deadline:
+                stopped_by = "wall_time"
+            elif self._server is not None and self._server.poll() is not None:
+                stopped_by = "server_exit"
+            if stopped_by is not None:
+                self._stop_controller(process, match)
+                _, status = os.waitpid(process.pid, 0)
+                break
+            time.sleep(SAMPLE_PERIOD_S)
+        ended = time.monotonic()
+        process.returncode = os.waitstatus_to_exitcode(status)
+        # What it left behind: its session's processes without the sandbox; in it, none
+        # (its process namespace ended with it), unless the kernel is slow to say so.
+        kill_all(**match)
+        output.join(OUTPUT_DRAIN_S)
+        return Observed(
+            exit_status=process.returncode, by_signal_code=self.sandboxed,
+            stopped_by=stopped_by, wall_time_s=ended - started,
+            peak_tasks=peak_tasks if self.sandboxed else None,
+            peak_memory_bytes=peak_memory, output_tail=output.tail,
+            output_bytes=output.total_bytes)
+
+    def _stop_controller(self, process: subprocess.Popen[bytes],
+                         match: Mapping[str, int]) -> None:
+        """Kill every process of the controller, ``process`` not yet waited for.
+
+        (Not waited for, its pid is still its own.) In the sandbox, killing bubblewrap ends
+        its process namespace (``--die-with-parent``), whose end kills every process in it;
+        its user's processes are then killed too, should any remain. Without it, its process
+        group, then its session.
+        """
+        if self.sandboxed:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(process.pid, signal.SIGKILL)
+        else:
+            _kill_group(process.pid)
+        kill_all(**match)
+
+
+def _kill_group(pgid: int) -> None:
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(pgid, signal.SIGKILL)
+
+
+def free_port() -> int:
+    """A TCP port free on this machine's loopback now (for a simulator without sandbox)."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def copy_submission(source: Path, target: Path) -> None:
+    """Copy a submission: its folders, regular files and symbolic links.
+
+    Links are copied as links, never followed: a link to another student's folder stays a
+    link, to nothing in the sandbox. Devices, pipes and sockets are left out.
+    """
+
+    def not_copied(folder: str, names: list[str]) -> list[str]:
+        left_out = []
+        for name in names:
+            mode = os.lstat(os.path.join(folder, name)).st_mode
+            if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode) or stat.S_ISLNK(mode)):
+                left_out.append(name)
+        return left_out
+
+    shutil.copytree(source, target, symlinks=True, ignore=not_copied)
+
+
+def own_tree(root: Path, uid: int) -> None:
+    """Give ``root`` and everything in it to ``uid`` (user and group), links not followed."""
+    os.lchown(root, uid, uid)
+    os.chmod(root, 0o700)
+    for folder, folders, files in os.walk(root):
+        for name in (*folders, *files):
+            os.lchown(os.path.join(folder, name), uid, uid)
