@@ -119,6 +119,13 @@ def grid_over(bounds: tuple[float, float, float, float], resolution_m: float,
                         cell_index(max_y - origin_y, resolution_m) + 1 + MARGIN_CELLS)
 
 
+def default_resolution_m(bounds: tuple[float, float, float, float]) -> float:
+    """The resolution of a world that names none: ``DEFAULT_MAP_RESOLUTION_M``, or for a
+    world too large for it the finest that fits ``MAX_MAP_CELLS``."""
+    min_x, min_y, max_x, max_y = bounds
+    return max(DEFAULT_MAP_RESOLUTION_M, _finest_resolution_m(max_x - min_x, max_y - min_y))
+
+
 def _count(cells: float) -> str:
     """A cell count for an error message (a tiny resolution gives an infinite one)."""
     return f"{cells:,.0f}" if math.isfinite(cells) else "infinitely many"

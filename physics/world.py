@@ -32,7 +32,12 @@ from typing import Any
 
 import yaml
 
-from physics.map_grid import DEFAULT_MAP_RESOLUTION_M, check_resolution, grid_over
+from physics.map_grid import (
+    DEFAULT_MAP_RESOLUTION_M,
+    check_resolution,
+    default_resolution_m,
+    grid_over,
+)
 from physics.params import NoiseParams
 from physics.shipped import shipped
 from physics.snapshots import Pose2D
@@ -236,6 +241,8 @@ def world_from_dict(document: Any, *, source: str = "<world>") -> World:
                       top.get("map_resolution_m", DEFAULT_MAP_RESOLUTION_M)),
                   localization=_localization(source, top.get("localization", LOCALIZATIONS[0])),
                   noise=_noise(source, top.get("noise")))
+    if "map_resolution_m" not in top:  # a large world's default map is coarser, not an error
+        world = dataclasses.replace(world, map_resolution_m=default_resolution_m(world.bounds))
     grid_over(world.bounds, world.map_resolution_m, f"{source}: map_resolution_m")
     return world
 

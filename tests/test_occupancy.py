@@ -302,3 +302,19 @@ def test_an_absurd_grid_is_refused_with_the_finest_resolution_that_fits() -> Non
     assert finest == 0.15
     with pytest.raises(ConfigError, match="infinitely many cells"):
         grid_over((0.0, 0.0, 10.0, 10.0), 1e-300)
+
+
+def test_a_large_world_that_names_no_resolution_gets_the_finest_that_fits(tmp_path: Any) -> None:
+    """A 100 m world loads (its /map coarser than the default, within the cap); naming the
+    default resolution outright in the same world is refused with the one that fits."""
+    path = tmp_path / "large.yaml"
+    path.write_text("walls: [[0, 0, 100, 0], [0, 100, 100, 100]]\nstart: [1, 1, 0]\n")
+    world = load_world(path)
+    assert world.map_resolution_m == 0.15
+    assert rasterise(world).cells.size <= MAX_MAP_CELLS
+    small = tmp_path / "small.yaml"
+    small.write_text("walls: [[0, 0, 5, 0]]\nstart: [1, 1, 0]\n")
+    assert load_world(small).map_resolution_m == 0.05
+    path.write_text(path.read_text() + "map_resolution_m: 0.05\n")
+    with pytest.raises(ConfigError, match="use 0.15 m or coarser"):
+        load_world(path)
