@@ -3,9 +3,9 @@
 // class-root-reasons.js), where robot NAME's topics and services are under /NAME: ONE
 // WebSocket to a single process, or one per worker for a class spread over workers behind
 // nginx (class-workers.js). This module only wires the others:
-// the token (class-token.js), the robots' topics (class-feed.js), their status
-// (class-poller.js), the commands (class-commands.js) and the grid (class-grid.js), drawn in
-// one animation loop.
+// the token (class-token.js), the robots' topics (class-feed.js), their status (one call per
+// root twice a second: class-poller.js), the commands (class-commands.js) and the grid
+// (class-grid.js), drawn in one animation loop.
 
 import { ROSLIB } from './vendor.js';
 import { loadSiteConfig } from './connection.js';
@@ -85,16 +85,23 @@ async function main() {
   const { commands } = roots; // each robot's calls, over the root it lives behind
   const feed = new ClassFeed(roots.list[0].connection, robot);
   const stateOf = (name) => feed.states.get(name);
-  const poller = new StatusPoller({
-    names: () => feed.names,
-    poll: async (name) => {
+  // Each root's robots' statuses, all in one call per root (/websim/class_status).
+  const pollers = new Map(roots.list.map((root) => [root, new StatusPoller({
+    poll: async () => {
+      const names = feed.names.filter((name) => roots.rootOf(name) === root);
       try {
-        onStatus(stateOf(name), await commands.status(name), performance.now());
+        const statuses = await root.commands.classStatus();
+        const nowMs = performance.now();
+        for (const name of names) {
+          const values = statuses.get(name);
+          if (values) onStatus(stateOf(name), values, nowMs);
+          else onStatusError(stateOf(name), `status: ${name} is no longer listed`);
+        }
       } catch (error) {
-        onStatusError(stateOf(name), `status: ${error.message}`);
+        for (const name of names) onStatusError(stateOf(name), `status: ${error.message}`);
       }
     },
-  });
+  })]));
 
   // One robot's actions, the card's buttons and the "for all" buttons alike.
   const defaultMode = parameterSpec(robot, PARAMETERS.mode).default;
@@ -114,7 +121,7 @@ async function main() {
         ? PAYLOAD_FACTORS[0] : PAYLOAD_FACTORS.at(-1)),
   };
   const act = (name, action, call = () => actions[action](name)) => runAction(
-    stateOf(name), action, call).finally(() => poller.pollNow(name));
+    stateOf(name), action, call).finally(() => pollers.get(roots.rootOf(name))?.pollNow());
 
   const grid = new ClassGrid($('#class-grid'), $('#robot-card'), robot, {
     robotsPath: config.robotsPath,
@@ -190,6 +197,7 @@ async function main() {
       const added = feed.addRobots(roots.claim(root, await root.commands.robots()),
         root.connection);
       grid.add(added.map(stateOf));
+      if (added.length) pollers.get(root).pollNow(); // their first status now, not in a period
       root.listed = true;
       root.message = null;
       classMessage = feed.names.length === 0 ? { kind: 'info', text: noRobots } : null;
@@ -241,12 +249,12 @@ async function main() {
       root.message = { kind: 'info', text: 'Connected; asking for the class\'s robots…' };
       render();
       loadRobots(root);
-      if (!poller.running) poller.start();
+      pollers.get(root).start();
       clearInterval(robotsTimer);
       robotsTimer = setInterval(() => loadRobots(root), ROBOTS_REFRESH_MS);
     });
     connection.addEventListener('disconnected', () => {
-      if (!roots.anyConnected(root)) poller.stop();
+      pollers.get(root).stop();
       clearInterval(robotsTimer);
     });
   }
@@ -261,7 +269,7 @@ async function main() {
   window.addEventListener('pageshow', (event) => {
     if (event.persisted && token) roots.connect();
   });
-  window.websim = { roots, robot, feed, grid, poller, commands }; // for the console
+  window.websim = { roots, robot, feed, grid, pollers, commands }; // for the console
 
   if (token) {
     roots.connect();
