@@ -247,8 +247,7 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     try:
         http = await start_http(
             args.host, args.http_port, args.web_dir,
-            lambda token: server.health(full=server.is_admin_token(token)), site,
-            server.limits, server.proxies)
+            server.health_for, site, server.limits, server.proxies)
     except OSError as error:
         websocket.close()
         return _port_error("HTTP", args.host, args.http_port, error)

@@ -12,10 +12,12 @@ import { loadSiteConfig } from './connection.js';
 import { runFrameLoop } from './connection-bar.js';
 import { loadRobot, parameterSpec } from './robot.js';
 import { rootWsUrl } from './class-plan.js';
-import { explainNoRobots, NEEDS_TOKEN, probeHealth } from './class-root-reasons.js';
+import {
+  explainNoRobots, NEEDS_TOKEN, probeHealth, tokenRefused, WRONG_TOKEN,
+} from './class-root-reasons.js';
 import { loadWorkers, rootTargets } from './class-workers.js';
 import { ClassRoots, rootsBadge, rootsMessage } from './class-root-connections.js';
-import { bindTokenCard, instructorToken } from './class-token.js';
+import { bindTokenCard, forgetToken, instructorToken } from './class-token.js';
 import { ClassFeed } from './class-feed.js';
 import { StatusPoller } from './class-poller.js';
 import {
@@ -188,6 +190,30 @@ async function main() {
     badge.dataset.status = 'closed';
     showMessage({ kind: 'info', text: NEEDS_TOKEN });
   };
+  // The class server does not take the token: nothing is retried with it, it is not kept,
+  // and it is asked for again at once.
+  const refuseToken = () => {
+    token = ''; // first: the roots' status listeners leave the closes below alone
+    forgetToken(storage);
+    roots.close();
+    for (const root of roots.list) {
+      root.failure = null;
+      root.message = null;
+    }
+    badge.textContent = 'wrong token';
+    badge.dataset.status = 'error';
+    badge.title = WRONG_TOKEN;
+    showMessage({ kind: 'error', text: WRONG_TOKEN });
+    tokenCard.ask(true);
+  };
+  // A token is checked with the page's own server before a socket carries it: a refused
+  // handshake is, in a browser, a close without a reason, as a server out of reach is.
+  const connectWith = async (checked) => {
+    const health = await probeHealth(checked);
+    if (checked !== token) return; // another token was entered meanwhile
+    if (tokenRefused(health)) refuseToken();
+    else roots.connect(checked);
+  };
 
   // The robots: listed by each root when it opens, and again now and then.
   const noRobots = roots.list.length === 1 ? 'The class has no robots yet.'
@@ -218,7 +244,7 @@ async function main() {
         root.message = null;
       }
       if (token) {
-        roots.connect(token);
+        connectWith(token);
       } else {
         roots.close();
         noToken();
@@ -239,8 +265,12 @@ async function main() {
         render();
         return;
       }
-      const health = await probeHealth();
+      const health = await probeHealth(token);
       if (connection.isConnected || !token) return; // it opened while the server was asked
+      if (tokenRefused(health)) { // the server no longer takes it (restarted with another)
+        refuseToken();
+        return;
+      }
       root.failure = { close, health };
       root.message = null;
       render();
@@ -272,7 +302,7 @@ async function main() {
   window.websim = { roots, robot, feed, grid, pollers, commands }; // for the console
 
   if (token) {
-    roots.connect();
+    connectWith(token);
   } else {
     noToken();
     tokenCard.ask(true);
