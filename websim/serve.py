@@ -248,8 +248,15 @@ def proxies_from(args: argparse.Namespace) -> TrustedProxies:
 
 
 def origins_from(args: argparse.Namespace) -> OriginPolicy:
-    """The origin policy the options ask for."""
-    return OriginPolicy.default(args.host, args.http_port, args.allow_origin)
+    """The origin policy the options ask for.
+
+    Behind a proxy (``--public-http-port``) the pages students open are the proxy's, on its
+    port, at the name they typed: a worker bound to 127.0.0.1 refused every page but this
+    machine's own (a student's page at http://HOST:8080/robots/NAME/ got 403).
+    """
+    public_http_port = getattr(args, "public_http_port", None)
+    return OriginPolicy.default(args.host, public_http_port or args.http_port,
+                                args.allow_origin, proxied=public_http_port is not None)
 
 
 async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int:
