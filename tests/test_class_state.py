@@ -78,6 +78,28 @@ def test_a_classroom_comes_back_as_it_was_with_the_same_tokens(tmp_path: Path) -
     state.close()
 
 
+def test_a_worker_comes_back_with_the_robots_it_had_made(tmp_path: Path) -> None:
+    """A worker (lazy: it makes a robot when nginx first routes it there) restarted with
+    robots in its state file: it crashed ('dictionary changed size during iteration')."""
+    path = tmp_path / "state.sqlite"
+    roster = [Student("alice"), Student("bob"), Student("carol")]
+    state = ClassState(path, IDENTITY)
+    before = Classroom(roster, make_robot, idle_pause_s=None, lazy=True, state=state)
+    for name in ("alice", "bob"):
+        host = before.get(name)
+        assert host is not None
+        host.robot.sim.command(0.2, 0.0)
+        host.robot.sim.step(20)
+    before.save()
+    state.close()
+
+    state = ClassState(path, IDENTITY)
+    after = Classroom(roster, make_robot, idle_pause_s=None, lazy=True, state=state)
+    assert set(dict(after)) == {"alice", "bob"}, "carol was never made: she is not now"
+    assert dict(after)["bob"].robot.sim.ground_truth().x == pytest.approx(0.2, abs=0.02)
+    state.close()
+
+
 def test_another_class_a_newer_schema_a_locked_or_corrupt_file_are_refused(
         tmp_path: Path) -> None:
     path = tmp_path / "state.sqlite"
