@@ -10,8 +10,11 @@ of what it sends in the messages, before they are encoded. So the robots' bridge
 know nothing of the view, and whatever the instructor holds on a robot is released when the
 connection goes.
 
-At the root itself: ``/websim/robots`` (no args) lists the robots' names. CBOR is not
-offered on this view, nor fragmented replies: every frame to it is JSON text.
+At the root itself: ``/websim/robots`` (no args) lists the robots' names, and
+``/websim/class_status`` (no args) every robot's status at once (``RobotHost.status``), which
+the dashboard asks for twice a second: one answer of a fixed size per robot, however many
+clients the robots have, so a class of 100 costs one small call, not 100. CBOR is not offered
+on this view, nor fragmented replies: every frame to it is JSON text.
 """
 
 from __future__ import annotations
@@ -28,6 +31,10 @@ from rosbridge.core.session import Flush, Ready, Session, take_flush
 
 ROBOTS_SERVICE = "/websim/robots"
 """At the root: ``{names: [...]}``, the class's robots."""
+
+CLASS_STATUS_SERVICE = "/websim/class_status"
+"""At the root: ``{robots: [{name, **status}]}``, every robot's ``RobotHost.status`` in the
+class's order (``websim/srv/ClassStatus``)."""
 
 
 class InstructorView:
@@ -82,8 +89,9 @@ class InstructorView:
                     flush += bridge.handle_operation(inner, op, dict(message))
                 return flush
             name = message[field]
-            if op == "call_service" and name == ROBOTS_SERVICE:
-                self._robots(session, message)
+            if op == "call_service" and name in (ROBOTS_SERVICE, CLASS_STATUS_SERVICE):
+                self._answer(session, message, self._robots() if name == ROBOTS_SERVICE
+                             else self._statuses())
                 return Flush()
             robot, _, rest = name.lstrip("/").partition("/")  # robot names: a-z 0-9 _ -
             bridge, inner = self._robot(session, robot)
@@ -113,10 +121,17 @@ class InstructorView:
         self._inner[robot] = (host.bridge, inner)
         return host.bridge, inner
 
-    def _robots(self, session: Session, message: dict[str, Any]) -> None:
-        response: dict[str, Any] = {"op": "service_response", "service": ROBOTS_SERVICE,
-                                    "values": {"names": [name for name, _ in self._classroom]},
-                                    "result": True}
+    def _robots(self) -> dict[str, Any]:
+        return {"names": [name for name, _ in self._classroom]}
+
+    def _statuses(self) -> dict[str, Any]:
+        return {"robots": [{"name": name, **host.status()} for name, host in self._classroom]}
+
+    @staticmethod
+    def _answer(session: Session, message: dict[str, Any], values: dict[str, Any]) -> None:
+        """The root's own service ``message`` asked for, answered with ``values``."""
+        response: dict[str, Any] = {"op": "service_response", "service": message["service"],
+                                    "values": values, "result": True}
         if "id" in message:
             response["id"] = message["id"]
         session.reply(response)

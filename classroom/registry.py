@@ -245,7 +245,7 @@ class Classroom:
                     not lazy or name in self._saved):
                 self._enrol(self.students[name])
         if lazy:
-            for name in self._saved:
+            for name in list(self._saved):  # _enrol takes each robot's saved state out
                 if name in self.students and name not in self._hosts:
                     self._enrol(self.students[name])
 

@@ -14,6 +14,7 @@ refused with the reason (``ConfigError``), never overwritten: ``--fresh`` starts
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import secrets
@@ -34,6 +35,9 @@ SAVE_INTERVAL_S = 2.0
 SECRET_BYTES = 32
 """Random bytes of a class secret."""
 
+ROSTER_DIGEST_CHARS = 12
+"""Hex digits of a roster path's SHA-256 in a worker's state file name (48 bits)."""
+
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS enrolments (
@@ -47,7 +51,9 @@ def default_state_path(class_spec: str, worker_port: int | None = None) -> Path:
 
     Beside the roster (``ROSTER.websim-state.sqlite``), or, for ``--class N`` and for a
     worker (one file each, named by its WebSocket port), in the user's data directory
-    (``$XDG_DATA_HOME/websim``, else ``~/.local/share/websim``).
+    (``$XDG_DATA_HOME/websim``, else ``~/.local/share/websim``). A worker's file is named by
+    its roster's name and a digest of the roster's absolute path too: two rosters of one name
+    in two folders are two classes (``class_identity``), never one file.
     """
     data = Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share") / "websim"
     if class_spec.isdigit():
@@ -56,7 +62,8 @@ def default_state_path(class_spec: str, worker_port: int | None = None) -> Path:
                        f"{stem}.sqlite")
     roster = Path(class_spec).resolve()
     if worker_port:
-        return data / f"{roster.stem}-worker-{worker_port}.sqlite"
+        digest = hashlib.sha256(str(roster).encode()).hexdigest()[:ROSTER_DIGEST_CHARS]
+        return data / f"{roster.stem}-{digest}-worker-{worker_port}.sqlite"
     return roster.with_name(f"{roster.name}.websim-state.sqlite")
 
 

@@ -6,7 +6,8 @@
 // The same program as course_snippets.js (which is for roslib 1.4.1, the course text's
 // version): connects with new ROSLIB.Ros({url}), subscribes to /odom and /scan, drives the
 // robot forward and into a left turn for two seconds by publishing geometry_msgs/msg/Twist on
-// /cmd_vel, prints what it sees, stops the robot and exits. It runs unmodified against
+// /cmd_vel, prints what it sees, stops the robot and exits (status 1 if the robot did not move:
+// the bridge refused the commands). It runs unmodified against
 // `websim serve` (ws://localhost:9090), the Docker stack (ws://HOST:9090) or the real robot's
 // rosbridge: only the URL changes (section 2.5.6.3). In a class (`websim serve --class`) the URL
 // is your robot's with its token, ws://HOST:9090/robots/NAME?token=TOKEN: without the token you
@@ -22,6 +23,9 @@ import * as ROSLIB from 'roslib';
 const url = process.argv[2] || 'ws://localhost:9090';
 const DRIVE_MS = 2000;
 const TIMEOUT_MS = 10000;
+const NOT_DRIVEN = 'the robot did not move: the bridge refused the commands. A class robot '
+  + 'drives only with its token, ws://HOST:9090/robots/NAME?token=TOKEN (without it your code '
+  + 'may watch the robot, not drive it).';
 
 function yawOf(pose) {
   // A planar quaternion: yaw = 2 atan2(z, w).
@@ -119,6 +123,10 @@ ros.on('connection', () => {
       stop();
       console.log(`odom end: ${describe(lastOdom)}`);
       console.log(`received ${scans} scans`);
+      if (describe(lastOdom) === describe(firstOdom)) { // it turned 1 rad if it drove
+        console.error(NOT_DRIVEN);
+        process.exitCode = 1;
+      }
       clearTimeout(giveUp);
       odomListener.unsubscribe();
       scanListener.unsubscribe();

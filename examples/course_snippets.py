@@ -6,7 +6,8 @@
 
 Connects to rosbridge, subscribes to /odom and /scan, drives the robot forward and into a left
 turn for two seconds by publishing geometry_msgs/msg/Twist on /cmd_vel, prints what it sees,
-stops the robot and exits (status 1 if no data arrived). The same script runs unmodified
+stops the robot and exits (status 1 if no data arrived, or if the robot did not move: the
+bridge refused the commands). The same script runs unmodified
 against ``websim serve`` (ws://localhost:9090), the Docker stack (ws://HOST:9090) or the real
 robot's rosbridge: only the address changes. In a class (``websim serve --class``) the address
 is your robot's, with its token: without the token you may watch it but not drive it. Needs
@@ -28,6 +29,9 @@ DRIVE_S = 2.0
 COMMAND_PERIOD_S = 0.1
 CONNECT_TIMEOUT_S = 5.0
 TIMEOUT_S = 10.0
+NOT_DRIVEN = ("the robot did not move: the bridge refused the commands. A class robot drives "
+              "only with its token, ws://HOST:9090/robots/NAME?token=TOKEN (without it your "
+              "code may watch the robot, not drive it).")
 
 
 def address(argv: list[str]) -> tuple[str, int, bool]:
@@ -116,6 +120,9 @@ def main(argv: list[str]) -> int:
         ros.terminate()
     print(f"odom end: {describe(odoms[-1])}")
     print(f"received {len(scans)} scans")
+    if describe(odoms[-1]) == describe(odoms[0]):  # it turned 1 rad if it drove
+        print(NOT_DRIVEN, file=sys.stderr)
+        return 1
     return 0
 
 

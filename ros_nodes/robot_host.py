@@ -50,7 +50,8 @@ publishes no sheddable sensor's message (/scan): the biggest message goes first,
 
 STATUS_SERVICE = "/websim/status"
 """Admin only: a robot's clients and their addresses, its last driver, collisions, mode,
-payload and whether it is paused (the instructor's dashboard polls it)."""
+payload and whether it is paused (``RobotHost.status`` and the clients' addresses; the
+instructor's dashboard asks the class's root for every robot's ``status`` at once)."""
 
 PAUSE_SERVICE = "/websim/pause"
 """Admin only: ``{paused: true}`` holds the robot, ``{paused: false}`` lets it run."""
@@ -252,14 +253,22 @@ class RobotHost:
         except Exception as error:
             self.faults.record("resetting the robot", error)
 
-    def _status(self, args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
-        """``/websim/status``: who is connected and driving, collisions, mode and payload."""
-        require_admin(session, STATUS_SERVICE)
+    def status(self) -> dict[str, Any]:
+        """What the instructor's dashboard shows of this robot, a fixed set of fields.
+
+        ``client_count`` and ``admin_count`` (clients with the robot's or the instructor's
+        token), ``last_driver`` (the address of the client whose /cmd_vel the robot took last)
+        and ``last_drive_age_s`` (how long ago, s, by the robot's clock), ``collisions``,
+        ``mode``, ``mass_kg``, ``inertia_kg_m2``, ``paused`` (not ticking: held or idle),
+        ``held`` (by the instructor), ``speed_mps``. Each field a number, a string or None:
+        a class's statuses together stay small (``InstructorView``'s class status).
+        """
         params = self.robot.sim.params
         drive_s = self.endpoint.last_drive_s
+        sessions = self.bridge.sessions
         return {
-            "clients": [{"address": other.peer, "admin": other.is_admin}
-                        for other in sorted(self.bridge.sessions, key=lambda s: s.peer)],
+            "client_count": len(sessions),
+            "admin_count": sum(1 for session in sessions if session.is_admin),
             "last_driver": self.endpoint.last_driver,
             "last_drive_age_s": None if drive_s is None
             else round(self._clock.monotonic_s() - drive_s, 3),
@@ -270,6 +279,15 @@ class RobotHost:
             "paused": self.stats.paused,
             "held": self.held,
             "speed_mps": self.robot.sim.ground_truth().v,
+        }
+
+    def _status(self, args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:
+        """``/websim/status``: ``status()`` and each client's address and rights."""
+        require_admin(session, STATUS_SERVICE)
+        return {
+            "clients": [{"address": other.peer, "admin": other.is_admin}
+                        for other in sorted(self.bridge.sessions, key=lambda s: s.peer)],
+            **self.status(),
         }
 
     def _pause(self, args: Mapping[str, Any], session: Session) -> Mapping[str, Any]:

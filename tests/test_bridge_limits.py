@@ -176,3 +176,8 @@ def test_origin_policy_admits_its_own_pages_local_pages_and_clients_without_orig
     assert not classroom.allows("http://evil.example:8080", "192.168.1.5:9090")
     assert classroom.allows("HTTPS://Robot.example")
     assert OriginPolicy.default("127.0.0.1", 8080, ["*"]).allows("http://anything:1")
+    worker = OriginPolicy.default("127.0.0.1", 8080, proxied=True)  # nginx's page port
+    assert worker.allows("http://class.example:8080", "class.example:9090"), "through nginx"
+    assert worker.allows("http://192.168.1.5:8080", "192.168.1.5:9090")
+    assert not worker.allows("http://evil.example:8080", "class.example:9090")
+    assert not worker.allows("http://class.example:8081", "class.example:9090")

@@ -419,6 +419,41 @@ def test_the_instructor_sees_every_robot_under_its_namespace(server: ServerProce
     assert asyncio.run(ground_truth_x(robot_url(server, "carol"))) == 0.0
 
 
+def test_the_root_answers_every_robots_status_at_once(server: ServerProcess) -> None:
+    """``/websim/class_status``: what the dashboard shows of each robot, in one call."""
+    root = f"ws://127.0.0.1:{server.ws_port}/?token={ADMIN_TOKEN}"
+
+    async def scenario() -> tuple[dict[str, Any], dict[str, Any]]:
+        async with websockets.connect(owner_url(server, "carol")) as carol, \
+                websockets.connect(robot_url(server, "carol")), \
+                websockets.connect(root) as ws:
+            await carol.send(json.dumps({"op": "publish", "topic": "/cmd_vel",
+                                         "msg": {"linear": {"x": 0.0}, "angular": {"z": 0.0}}}))
+            await asyncio.sleep(0.3)
+            whole = await reply_to(ws, {"op": "call_service", "id": "c",
+                                        "service": "/websim/class_status"})
+            one = await reply_to(ws, {"op": "call_service", "id": "s",
+                                      "service": "/carol/websim/status"})
+        return whole, one
+
+    whole, one = asyncio.run(scenario())
+    assert whole["service"] == "/websim/class_status" and whole["result"] is True, whole
+    robots = whole["values"]["robots"]
+    assert [robot["name"] for robot in robots] == ["alice", "bob", "carol"]
+    carol = robots[2]
+    assert carol["last_driver"].startswith("127.0.0.1:")
+    assert 0.0 <= carol["last_drive_age_s"] < 1.0, "carol's owner commanded zero 0.3 s ago"
+    assert (carol["client_count"], carol["admin_count"]) == (2, 1)  # owner + watcher
+    assert all((robot["last_driver"] is None) == (robot["last_drive_age_s"] is None)
+               for robot in robots)
+    # the per-robot status is the same, with each client's address besides
+    per_robot = one["values"]
+    assert {key for key in per_robot if key != "clients"} | {"name"} == set(carol)
+    assert len(per_robot["clients"]) == 3  # the root's own session on carol too
+    # one fixed set of fields per robot, however many clients it has: a bounded answer
+    assert all(set(robot) == set(carol) for robot in robots)
+
+
 def test_the_root_without_the_instructor_token_is_refused(server: ServerProcess) -> None:
     async def refused(url: str) -> str:
         with pytest.raises(websockets.InvalidStatus) as error:

@@ -23,7 +23,13 @@ import pytest
 import websockets
 
 from classroom.registry import Classroom, Student
-from classroom.state import SAVE_INTERVAL_S, SCHEMA_VERSION, ClassState, class_identity
+from classroom.state import (
+    SAVE_INTERVAL_S,
+    SCHEMA_VERSION,
+    ClassState,
+    class_identity,
+    default_state_path,
+)
 from physics import ConfigError, Simulation, load_world
 from ros_nodes.virtual_robot_core import VirtualRobot
 from websim import cli
@@ -72,6 +78,28 @@ def test_a_classroom_comes_back_as_it_was_with_the_same_tokens(tmp_path: Path) -
     state.close()
 
 
+def test_a_worker_comes_back_with_the_robots_it_had_made(tmp_path: Path) -> None:
+    """A worker (lazy: it makes a robot when nginx first routes it there) restarted with
+    robots in its state file: it crashed ('dictionary changed size during iteration')."""
+    path = tmp_path / "state.sqlite"
+    roster = [Student("alice"), Student("bob"), Student("carol")]
+    state = ClassState(path, IDENTITY)
+    before = Classroom(roster, make_robot, idle_pause_s=None, lazy=True, state=state)
+    for name in ("alice", "bob"):
+        host = before.get(name)
+        assert host is not None
+        host.robot.sim.command(0.2, 0.0)
+        host.robot.sim.step(20)
+    before.save()
+    state.close()
+
+    state = ClassState(path, IDENTITY)
+    after = Classroom(roster, make_robot, idle_pause_s=None, lazy=True, state=state)
+    assert set(dict(after)) == {"alice", "bob"}, "carol was never made: she is not now"
+    assert dict(after)["bob"].robot.sim.ground_truth().x == pytest.approx(0.2, abs=0.02)
+    state.close()
+
+
 def test_another_class_a_newer_schema_a_locked_or_corrupt_file_are_refused(
         tmp_path: Path) -> None:
     path = tmp_path / "state.sqlite"
@@ -109,6 +137,33 @@ def test_serve_names_the_problem_with_a_state_file(tmp_path: Path,
     assert cli.main(["serve", "--class", "3", "--state", str(state),
                      "--admin-token", ADMIN_TOKEN]) == 2
     assert "this file holds another class (robots:7, not robots:3)" in capsys.readouterr().err
+
+
+def test_workers_of_two_rosters_of_one_name_keep_two_files(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The README's scale-out recipe run in a second folder (its roster.txt, the same worker
+    ports) is another class: before, its worker found the first class's file in
+    ``$XDG_DATA_HOME/websim`` (roster-worker-9091.sqlite) and refused to start."""
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    rosters = []
+    for folder in ("spring", "autumn"):
+        (tmp_path / folder).mkdir()
+        rosters.append(tmp_path / folder / "roster.txt")
+    paths = [default_state_path(str(roster), 9091) for roster in rosters]
+    assert paths[0] != paths[1]
+    assert all(path.parent == tmp_path / "data" / "websim" for path in paths)
+    assert all(path.name.startswith("roster-") and path.name.endswith("-worker-9091.sqlite")
+               for path in paths)
+    assert default_state_path(str(rosters[0]), 9092) != paths[0], "one file per worker"
+    assert default_state_path(str(rosters[0]), 9091) == paths[0], "a restart finds it"
+    secrets = []
+    for roster, path in zip(rosters, paths, strict=True):  # each class opens its own
+        state = ClassState(path, class_identity(str(roster)))
+        secrets.append(state.secret)
+        state.close()
+    again = ClassState(paths[0], class_identity(str(rosters[0])))
+    assert again.secret == secrets[0] != secrets[1], "the first class's own secret, kept"
+    again.close()
 
 
 # ---- a real server killed with SIGKILL while 20 robots are driven ------------------------------

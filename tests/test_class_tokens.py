@@ -13,6 +13,8 @@ import csv
 import logging
 import os
 import stat
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -101,6 +103,29 @@ def test_the_links_file_is_private_atomic_and_never_written_through_a_link(
     with pytest.raises(ConfigError, match="is a symbolic link"):
         write_links(link, classroom, "class.example", 8080, 9090)
     assert target.read_text() == "not yours\n"
+
+
+def test_the_links_name_the_host_students_reach(tmp_path: Path) -> None:
+    """Behind nginx a worker binds 127.0.0.1, and its links said localhost, which no student's
+    machine reaches: --public-host names the proxy's host (the README's recipe gives it)."""
+    links = tmp_path / "links.csv"
+    server = start_server(["--class", "2", "--links", str(links), "--public-host",
+                           "class.example", "--public-http-port", "8080",
+                           "--public-ws-port", "9090"])
+    try:
+        rows = list(csv.DictReader(links.open()))
+    finally:
+        server.stop()
+    assert rows[0]["page"].startswith("http://class.example:8080/robots/robot01/#token=")
+    assert rows[0]["websocket"] == "ws://class.example:9090/robots/robot01"
+    assert rows[-1]["page"].startswith("http://class.example:8080/class?token=")
+    assert "), at class.example (--public-host" in "".join(server.output)  # the banner says
+    for bad in ("http://class.example", "class example", "a..example"):
+        result = subprocess.run([sys.executable, "-m", "websim.cli", "serve", "--class", "2",
+                                 "--public-host", bad], capture_output=True, text=True,
+                                check=False, timeout=60)
+        assert result.returncode == 2, bad
+        assert f"expected a host name or an IP address, got '{bad}'" in result.stderr
 
 
 def test_the_redaction_filter_takes_tokens_out_of_any_record() -> None:

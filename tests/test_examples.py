@@ -264,33 +264,46 @@ def test_roslibjs_page_drives_the_robot_in_chromium(server: ServerProcess) -> No
 
 # ---- a class robot, with its token (issue 20, section 4) -------------------------------------
 
-def test_the_snippets_drive_a_class_robot_with_its_token(tmp_path: Path) -> None:
-    """roslibpy and roslibjs reach ``ws://HOST:9090/robots/NAME?token=T`` and drive it; the
-    token is never printed."""
+def test_the_snippets_drive_a_class_robot_with_its_token_and_say_so_without_it(
+        tmp_path: Path) -> None:
+    """roslibpy and roslibjs (1.4.1 and 2.x) reach ``ws://HOST:9090/robots/NAME?token=T`` and
+    drive it; the token is never printed. Without the token the bridge refuses the commands,
+    which none of the libraries shows: the snippet says the robot did not move and why, and
+    exits 1 (it used to print its lines and exit 0)."""
     import csv
 
     links = tmp_path / "links.csv"
     server = start_server(["--class", "2", "--links", str(links)])
     try:
         token = {row["name"]: row["token"] for row in csv.DictReader(links.open())}["robot01"]
-        url = f"ws://127.0.0.1:{server.ws_port}/robots/robot01?token={token}"
+        url = f"ws://127.0.0.1:{server.ws_port}/robots/robot01"
         commands = []
         if importlib.util.find_spec("roslibpy") is not None:
-            commands.append([sys.executable, str(EXAMPLES / "course_snippets.py"), url])
+            commands.append(([sys.executable, str(EXAMPLES / "course_snippets.py")], None))
         if NODE is not None and ROSLIB.exists():
             script = student_folder(tmp_path / "student", "course_snippets.js", ROSLIB1_MODULES)
-            commands.append([NODE, str(script), url])
+            commands.append(([NODE, str(script)], None))
+        if ROSLIB2_SKIP is None:
+            script = student_folder(tmp_path / "student2", "course_snippets.mjs",
+                                    ROSLIB2_MODULES)
+            commands.append(([NODE or "node", script.name], script.parent))
         if not commands:
             pytest.skip("neither roslibpy nor node with roslib installed")
-        for command in commands:
-            result = subprocess.run(command, capture_output=True, text=True,
-                                    timeout=RUN_TIMEOUT_S, check=False)
+        for command, cwd in commands:
+            result = subprocess.run([*command, f"{url}?token={token}"], capture_output=True,
+                                    text=True, timeout=RUN_TIMEOUT_S, check=False, cwd=cwd)
             assert result.returncode == 0, result.stderr
             assert "Connected to ROS 2 at ws://127.0.0.1" in result.stdout
             assert token not in result.stdout + result.stderr
             end = [match for match in ODOM_LINE.finditer(result.stdout) if match[1] == "end"]
-            assert end and float(end[0][4]) > 0.5, result.stdout  # it turned: it drove
+            assert end and abs(float(end[0][4])) > 0.5, result.stdout  # it turned: it drove
             robot = server.health()["robots"]["robot01"]
             assert robot["last_driver"] is not None
+
+            watched = subprocess.run([*command, url], capture_output=True, text=True,
+                                     timeout=RUN_TIMEOUT_S, check=False, cwd=cwd)
+            assert watched.returncode == 1, (command, watched.stdout, watched.stderr)
+            assert "the robot did not move: the bridge refused the commands" in watched.stderr
+            assert "ws://HOST:9090/robots/NAME?token=TOKEN" in watched.stderr
     finally:
         server.stop()

@@ -39,7 +39,7 @@ def get(url: str) -> tuple[int, dict[str, str], bytes]:
         return response.status, dict(response.headers), response.read()
 
 
-def test_public_healthz_has_counts_only_and_the_token_adds_names(
+def test_public_healthz_has_counts_only_and_the_token_adds_names_and_says_it_is_accepted(
         server: ServerProcess) -> None:
     for base in (server.http_url, f"http://127.0.0.1:{server.ws_port}"):
         _, _, body = get(f"{base}/healthz")
@@ -48,10 +48,14 @@ def test_public_healthz_has_counts_only_and_the_token_adds_names(
         assert "clients" in public and "tick_jitter_p99_ms" in public
         assert "robots" not in public and "degraded_robots" not in public
         assert "robot01" not in body.decode()
+        assert public["token_accepted"] is False
         _, _, body = get(f"{base}/healthz?token={ADMIN_TOKEN}")
-        assert set(json.loads(body)["robots"]) == {"robot01", "robot02", "robot03"}
+        full = json.loads(body)
+        assert set(full["robots"]) == {"robot01", "robot02", "robot03"}
+        assert full["token_accepted"] is True  # how the dashboard tells a wrong token
         _, _, body = get(f"{base}/healthz?token=wrong-token")
-        assert "robots" not in json.loads(body)
+        wrong = json.loads(body)
+        assert "robots" not in wrong and wrong["token_accepted"] is False
 
 
 def test_a_single_robots_public_healthz_names_no_driver() -> None:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import json
+import socket
 import urllib.request
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -26,6 +27,7 @@ from deployment import NGINX, running_nginx
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import ClientConnection
 from websockets.sync.client import connect as connect_sync
+from websockets.typing import Origin
 
 from classroom.nginx_config import Worker
 
@@ -65,7 +67,8 @@ def proxy(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Proxy]:
                       + "\n")
     http_port, ws_port = free_port(), free_port()
     workers = [start_server(["--class", str(roster), "--worker", "--public-ws-port",
-                             str(ws_port)]) for _ in range(2)]
+                             str(ws_port), "--public-http-port", str(http_port)])
+               for _ in range(2)]
     try:
         with running_nginx(directory, [Worker("127.0.0.1", w.http_port, w.ws_port)
                                        for w in workers], http_port, ws_port):
@@ -191,6 +194,27 @@ def test_a_workers_root_through_nginx_needs_the_instructors_token(proxy: Proxy) 
                      open_timeout=5)
     assert unknown.value.response.status_code == 404
     assert b"/robots/NAME" in unknown.value.response.body
+
+
+def test_a_students_page_through_nginx_at_the_name_they_typed_may_connect(
+        proxy: Proxy) -> None:
+    """A student's browser on another machine opens http://HOST:8080/robots/NAME/ (its
+    Origin is not this machine's loopback): the worker, bound to 127.0.0.1 behind nginx,
+    accepts that page's WebSocket (it refused it, 403, before --public-http-port counted as
+    the pages' port); another site's page is still refused."""
+    def handshake(origin: str) -> ClientConnection:
+        sock = socket.create_connection(("127.0.0.1", proxy.ws_port), timeout=5)
+        return connect_sync(f"ws://class.example:{proxy.ws_port}/robots/student01",
+                            sock=sock, origin=Origin(origin), open_timeout=5)
+
+    with handshake(f"http://class.example:{proxy.http_port}") as ws:
+        ws.send(json.dumps({"op": "subscribe", "topic": "/odom"}))
+        while json.loads(ws.recv(timeout=5)).get("topic") != "/odom":
+            pass
+    for origin in (f"http://evil.example:{proxy.http_port}", "http://class.example:1"):
+        with pytest.raises(InvalidStatus) as refused:
+            handshake(origin)
+        assert refused.value.response.status_code == 403, origin
 
 
 def robot_odom_x(proxy: Proxy, name: str) -> float:

@@ -10,7 +10,7 @@ import time
 from collections.abc import Sequence
 
 from classroom import nginx_config
-from classroom.registry import Student, strong_token, weak_token
+from classroom.registry import Student, check_name, strong_token, weak_token
 from physics import MODES, TICK_PERIOD_S, ConfigError, Simulation, load_params, load_world
 from physics.params import SHIPPED_PARAMS_FILE
 from physics.world import WORLDS_DIR
@@ -98,6 +98,17 @@ def build_parser() -> argparse.ArgumentParser:
     map_command.add_arguments(map_files)
     map_files.set_defaults(run=map_command.run)
 
+    token = commands.add_parser(
+        "token", help="print a random token for --admin-token, or a roster with a token each",
+        description="Print a random token of the kind --admin-token and a roster's token "
+                    "field accept (192 bits, URL-safe, a mix of kinds of characters); with "
+                    "--roster, a roster line NAME,,TOKEN for each name (a class spread over "
+                    "workers gives its robots' tokens in the roster: every worker then agrees "
+                    "on them).")
+    token.add_argument("--roster", nargs="+", metavar="NAME", default=None,
+                       help="robot names: print NAME,,TOKEN for each (a roster file)")
+    token.set_defaults(run=_run_token)
+
     describe = commands.add_parser(
         "robot-json", help="print the robot.json the web page reads (limits, topics, params)",
         description="Print the robot description the web page reads: speed limits, footprint, "
@@ -175,6 +186,19 @@ def _run_demo(args: argparse.Namespace) -> int:
             odom = sim.odometry()
             print(f"{sim.time_s:6.2f}  {odom.x:8.4f}  {odom.y:8.4f}  {odom.theta:14.4f}  "
                   f"{odom.v:6.3f}  {odom.omega:9.3f}", flush=True)
+    return 0
+
+
+def _run_token(args: argparse.Namespace) -> int:
+    if args.roster is None:
+        print(strong_token())
+        return 0
+    names = [check_name(name, "--roster") for name in args.roster]
+    if len(set(names)) != len(names):
+        repeated = sorted({name for name in names if names.count(name) > 1})
+        raise ConfigError(f"--roster: {', '.join(repeated)} named twice")
+    for name in names:
+        print(f"{name},,{strong_token()}")
     return 0
 
 

@@ -11,6 +11,7 @@ import asyncio
 import errno
 import gc
 import importlib.util
+import ipaddress
 import logging
 import math
 import os
@@ -158,6 +159,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="who publishes map -> odom on /tf: 'perfect', websim, from the "
                              "ground truth; 'none', a localizer (AMCL, slam_toolbox), as on the "
                              "real robot (default: the world's 'localization', else none)")
+    parser.add_argument("--public-host", type=_host_name, default=None, metavar="HOST",
+                        help="the host name or address students reach (this machine's on "
+                             "the network, or a proxy's), for the links file (default: this "
+                             "machine's name with --host 0.0.0.0, else --host)")
     parser.add_argument("--ros", action="store_true",
                         help="also run the virtual_robot node on the ROS 2 graph and relay "
                              "rosbridge topics to it (needs rclpy: pip install '.[ros]')")
@@ -182,6 +187,21 @@ def _positive(kind: type[float] | type[int]) -> Callable[[str], float]:
             raise argparse.ArgumentTypeError(f"must be greater than 0, got '{text}'")
         return value
     return parse
+
+
+HOST_NAME = re.compile(r"(?=.{1,253}$)[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?"
+                       r"(?:\.[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*")
+"""A DNS host name (RFC 1123 labels): what may stand as the host of a URL besides an IP."""
+
+
+def _host_name(text: str) -> str:
+    """An argparse type: a host name or an IP address, as it may stand in a URL."""
+    try:
+        return str(ipaddress.ip_address(text))
+    except ValueError:
+        if HOST_NAME.fullmatch(text):
+            return text
+    raise argparse.ArgumentTypeError(f"expected a host name or an IP address, got '{text}'")
 
 
 def _url_host(host: str) -> str:
@@ -228,8 +248,15 @@ def proxies_from(args: argparse.Namespace) -> TrustedProxies:
 
 
 def origins_from(args: argparse.Namespace) -> OriginPolicy:
-    """The origin policy the options ask for."""
-    return OriginPolicy.default(args.host, args.http_port, args.allow_origin)
+    """The origin policy the options ask for.
+
+    Behind a proxy (``--public-http-port``) the pages students open are the proxy's, on its
+    port, at the name they typed: a worker bound to 127.0.0.1 refused every page but this
+    machine's own (a student's page at http://HOST:8080/robots/NAME/ got 403).
+    """
+    public_http_port = getattr(args, "public_http_port", None)
+    return OriginPolicy.default(args.host, public_http_port or args.http_port,
+                                args.allow_origin, proxied=public_http_port is not None)
 
 
 async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int:
@@ -247,8 +274,7 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     try:
         http = await start_http(
             args.host, args.http_port, args.web_dir,
-            lambda token: server.health(full=server.is_admin_token(token)), site,
-            server.limits, server.proxies)
+            server.health_for, site, server.limits, server.proxies)
     except OSError as error:
         websocket.close()
         return _port_error("HTTP", args.host, args.http_port, error)
@@ -315,8 +341,10 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
                   "can drive the robots; only a token can change their parameters", flush=True)
         else:
             print("  listening on every network interface: anyone who can reach this machine "
-                  "can watch the robots; driving one needs its token (the links file)",
-                  flush=True)
+                  "can watch the robots; driving one needs its token ("
+                  + ("the links file" if getattr(args, "links", None) else
+                     "--links FILE writes every robot's; the dashboard's Token button shows "
+                     "one") + ")", flush=True)
         _print_lan_urls(args, robot is not None)
     if not (args.web_dir / "node_modules" / "roslib").is_dir():
         print(f"websim: warning: the page's libraries are not installed in {args.web_dir}; "

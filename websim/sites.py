@@ -189,10 +189,13 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
                        + ("restored: robots as they were, same tokens" if state.restored
                           else "new: saved every few seconds; --fresh starts over") + ")")
     if args.links is not None:
-        write_links(Path(args.links), classroom, public_host(args.host),
+        host = getattr(args, "public_host", None) or public_host(args.host)
+        write_links(Path(args.links), classroom, host,
                     args.public_http_port or args.http_port, site.ws_port, token)
         site.banner.append(f"links:     {args.links} (name, page, admin page with the robot's "
-                           "token, WebSocket, token; last, #instructor: the dashboard)")
+                           "token, WebSocket, token; last, #instructor: the dashboard), at "
+                           f"{_url_name(host)} (--public-host: the name or address students "
+                           "reach)")
     return site
 
 

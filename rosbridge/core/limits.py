@@ -545,9 +545,10 @@ class OriginPolicy:
     Attributes:
         allowed: accepted origins, ``scheme://host:port``, lower case.
         allow_any: accept every origin (``--allow-origin '*'``).
-        page_port: the web interface's port; when bound to every interface, a page on this
-            port is accepted from whatever address the request was sent to (the Host header),
-            since the machine's classroom address is not known in advance. None: off.
+        page_port: the web interface's port; when bound to every interface, or behind a
+            reverse proxy, a page on this port is accepted from whatever address the request
+            was sent to (the Host header), since the address students type is not known in
+            advance. None: off.
     """
 
     allowed: frozenset[str]
@@ -555,10 +556,15 @@ class OriginPolicy:
     page_port: int | None = None
 
     @classmethod
-    def default(cls, host: str, http_port: int, extra: Iterable[str] = ()) -> OriginPolicy:
+    def default(cls, host: str, http_port: int, extra: Iterable[str] = (), *,
+                proxied: bool = False) -> OriginPolicy:
         """The pages this server serves itself, plus ``extra`` (``*`` for any).
 
         Pages from this machine (``LOOPBACK_NAMES``) on any port ``allows`` accepts anyway.
+        ``proxied``: behind a reverse proxy that passes the client's Host header on (nginx's
+        ``proxy_set_header Host $http_host``), ``http_port`` being the proxy's page port:
+        students reach the pages and the WebSocket at the proxy's address, whatever this
+        process is bound to.
         """
         extra = list(extra)
         names = {"localhost", "127.0.0.1", "[::1]"}
@@ -568,7 +574,7 @@ class OriginPolicy:
         allowed = {f"http://{name}{suffix}" for name in names}
         allowed.update(_normalize(origin) for origin in extra if origin != ANY_ORIGIN)
         return cls(frozenset(allowed), allow_any=ANY_ORIGIN in extra,
-                   page_port=http_port if host in ALL_INTERFACES else None)
+                   page_port=http_port if proxied or host in ALL_INTERFACES else None)
 
     def allows(self, origin: str | None, host_header: str | None = None) -> bool:
         """Whether a handshake with this Origin (None: none sent) to this Host is accepted."""

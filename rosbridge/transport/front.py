@@ -139,6 +139,17 @@ class WebSocketFront(abc.ABC):
     async def run_ticks(self) -> None:
         """Tick the robots forever."""
 
+    def health_for(self, token: str | None) -> dict[str, Any]:
+        """``/healthz`` for the token presented (``?token=``), on both ports.
+
+        The full document with the admin token, else counts only; and ``token_accepted``,
+        whether the token is the admin token. A page can tell a wrong token from a server out
+        of reach only so: a browser shows a handshake refused with 403 as a close (1006)
+        without the status or the reason, as it shows a server that does not answer.
+        """
+        admin = self.is_admin_token(token)
+        return {**self.health(full=admin), "token_accepted": admin}
+
     def is_admin_token(self, token: str | None) -> bool:
         """Constant-time comparison of a presented token with the admin token."""
         if not token:
@@ -169,7 +180,7 @@ class WebSocketFront(abc.ABC):
         path = target.path
         token = _token(target.query)
         if path == "/healthz":
-            return json_response(self.health(full=self.is_admin_token(token)))
+            return json_response(self.health_for(token))
         address = self.client_address(connection, request)
         refused = self._check_origin(connection, request, address)
         if refused is not None:

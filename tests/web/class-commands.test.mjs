@@ -28,19 +28,26 @@ function connected(answer) {
   return { commands: new ClassCommands(connection, robot), calls };
 }
 
-test('reset, pause and status go to the robot\'s own services under its namespace', async () => {
+test('reset and pause go to the robot\'s own services under its namespace', async () => {
   const { commands, calls } = connected((call) => call.ok(
     call.name.endsWith('/websim/pause') ? { paused: call.request.paused } : {}));
   await commands.reset('alice');
   assert.deepEqual(await commands.pause('bob', true), { paused: true });
   await commands.pause('bob', false);
-  await commands.status('carol');
   assert.deepEqual(calls, [
     { name: `/alice${robot.services.reset.name}`, request: {} },
     { name: '/bob/websim/pause', request: { paused: true } },
     { name: '/bob/websim/pause', request: { paused: false } },
-    { name: '/carol/websim/status', request: {} },
   ]);
+});
+
+test('every robot\'s status comes at once from /websim/class_status on the root', async () => {
+  const { commands, calls } = connected((call) => call.ok({ robots: [
+    { name: 'robot01', mode: 'kinematic' }, { name: 'robot02', mode: 'dynamic' }] }));
+  const statuses = await commands.classStatus();
+  assert.deepEqual([...statuses.keys()], ['robot01', 'robot02']);
+  assert.equal(parseStatus(statuses.get('robot02')).mode, 'dynamic');
+  assert.deepEqual(calls, [{ name: '/websim/class_status', request: {} }]);
 });
 
 test('the robot list comes from /websim/robots on the root', async () => {

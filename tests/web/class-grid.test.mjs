@@ -10,10 +10,9 @@ import { robot } from './robot.mjs';
 
 test('clients: all of them, the admins (the dashboard is one) counted apart', () => {
   assert.equal(clientsText(null), '–');
-  assert.equal(clientsText(parseStatus({ clients: [] })), '0');
-  assert.equal(clientsText(parseStatus({ clients: [
-    { address: 'a:1', admin: false }, { address: 'b:2', admin: false },
-    { address: 'c:3', admin: true }] })), '3 (1 admin)');
+  assert.equal(clientsText(parseStatus({})), '–');
+  assert.equal(clientsText(parseStatus({ client_count: 0, admin_count: 0 })), '0');
+  assert.equal(clientsText(parseStatus({ client_count: 3, admin_count: 1 })), '3 (1 admin)');
 });
 
 test('payload ×1 and ×2 by robot.json\'s defaults, another one by its mass', () => {

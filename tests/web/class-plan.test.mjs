@@ -5,7 +5,8 @@ import { test } from 'node:test';
 
 import {
   CLASS_SERVICES, namespaced, namespacedRobot, ODOM_THROTTLE_MS, POSE_BUDGET_HZ,
-  POSE_THROTTLE_MAX_MS, POSE_THROTTLE_MIN_MS, poseThrottleMs, robotNames, robotSubscriptions,
+  POSE_THROTTLE_MAX_MS, POSE_THROTTLE_MIN_MS, poseThrottleMs, robotNames, robotStatuses,
+  robotSubscriptions,
   rootWsUrl, SCAN_THROTTLE_MS, subscriptionPlan,
 } from '../../web-interface/js/class-plan.js';
 import { robot } from './robot.mjs';
@@ -35,7 +36,7 @@ test('a robot\'s names are robot.json\'s under /NAME', () => {
   assert.equal(alice.services.set_parameters.name, `/alice${robot.services.set_parameters.name}`);
   assert.equal(alice.parameters, robot.parameters);
   assert.equal(robot.topics.odom.name.startsWith('/alice'), false, 'the description is unchanged');
-  assert.equal(namespaced('bob', CLASS_SERVICES.status.name), '/bob/websim/status');
+  assert.equal(namespaced('bob', CLASS_SERVICES.pause.name), '/bob/websim/pause');
 });
 
 test('ground truth shares a budget of pose messages; 40 robots get 200 ms each', () => {
@@ -87,4 +88,16 @@ test('the robot list keeps roster names, each once, in the server\'s order', () 
   assert.deepEqual(robotNames({ names: [] }), []);
   assert.throws(() => robotNames({}), /no names/);
   assert.throws(() => robotNames(null), /no names/);
+});
+
+test('a class status is each listed robot\'s status by name; odd entries are left out', () => {
+  const statuses = robotStatuses({ robots: [
+    { name: 'alice', last_driver: 'a:1' }, { name: '../x' }, null, { last_driver: 'b:2' },
+    { name: 'bob', mode: 'dynamic' }] });
+  assert.deepEqual([...statuses.keys()], ['alice', 'bob']);
+  assert.equal(statuses.get('alice').last_driver, 'a:1');
+  assert.equal(statuses.get('bob').mode, 'dynamic');
+  assert.deepEqual([...robotStatuses({ robots: [] }).keys()], []);
+  assert.throws(() => robotStatuses({ names: [] }), /no robots/);
+  assert.throws(() => robotStatuses(null), /no robots/);
 });

@@ -1,97 +1,103 @@
-// Status polling (web-interface/js/class-poller.js): every robot about every 2 s, staggered,
-// never two calls out for one robot, against mocked timers.
+// The class's status (web-interface/js/class-poller.js): one call per root, asked again a
+// period after each answer, never two out at once, at once after a command; mocked timers.
 import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
-import {
-  MIN_POLL_GAP_MS, pollGapMs, STATUS_PERIOD_MS, StatusPoller,
-} from '../../web-interface/js/class-poller.js';
+import { STATUS_PERIOD_MS, StatusPoller } from '../../web-interface/js/class-poller.js';
 
 const flush = () => new Promise((resolve) => { setImmediate(resolve); });
 
-test('the gap between calls is the period shared by the class, never below the minimum', () => {
-  assert.equal(pollGapMs(4), STATUS_PERIOD_MS / 4);
-  assert.equal(pollGapMs(40), 50);
-  assert.equal(pollGapMs(1000), MIN_POLL_GAP_MS);
-  assert.equal(pollGapMs(0), STATUS_PERIOD_MS);
-});
-
-test('each robot is asked once per period, at evenly spaced times', async (t) => {
+/** A poller whose calls are recorded (at the mocked clock) and answered when `answer` says. */
+function recorded(t, { answerAtOnce = true } = {}) {
   t.mock.timers.enable({ apis: ['setTimeout'] });
   const asked = [];
+  const pending = [];
   let clock = 0;
   const poller = new StatusPoller({
-    names: () => ['a', 'b', 'c', 'd'],
-    poll: async (name) => { asked.push([name, clock]); },
-    timers: globalThis,
-  });
-  poller.start();
-  for (clock = 0; clock <= 2 * STATUS_PERIOD_MS; clock += 100) {
-    t.mock.timers.tick(clock === 0 ? 0 : 100);
-    await flush();
-  }
-  poller.stop();
-  assert.deepEqual(asked.slice(0, 5), [['a', 0], ['b', 500], ['c', 1000], ['d', 1500], ['a', 2000]]);
-  assert.equal(asked.length, 9); // 0 to 4000 ms inclusive, one every 500 ms
-  assert.equal(poller.running, false);
-});
-
-test('a robot whose call is still out is skipped; it is asked again once answered', async (t) => {
-  t.mock.timers.enable({ apis: ['setTimeout'] });
-  const asked = [];
-  let release;
-  const poller = new StatusPoller({
-    names: () => ['slow', 'fast'],
-    poll: (name) => {
-      asked.push(name);
-      return name === 'slow' ? new Promise((resolve) => { release = resolve; }) : Promise.resolve();
+    poll: () => {
+      asked.push(clock);
+      if (answerAtOnce) return Promise.resolve();
+      return new Promise((resolve) => { pending.push(resolve); });
     },
   });
-  poller.start();
-  for (let i = 0; i < 4; i += 1) { // 0, 1000, 2000, 3000 ms: slow, fast, (slow out), fast
-    t.mock.timers.tick(i === 0 ? 0 : pollGapMs(2));
+  const advance = async (ms) => {
+    clock += ms;
+    t.mock.timers.tick(ms);
     await flush();
-  }
-  assert.deepEqual(asked, ['slow', 'fast', 'fast']);
-  release();
+  };
+  return { poller, asked, pending, advance };
+}
+
+test('the class is asked at once, then a period after each answer: twice a second', async (t) => {
+  const { poller, asked, advance } = recorded(t);
+  poller.start();
   await flush();
-  t.mock.timers.tick(pollGapMs(2));
+  for (let i = 0; i < 20; i += 1) await advance(100);
+  poller.stop();
+  assert.equal(STATUS_PERIOD_MS, 500);
+  assert.deepEqual(asked, [0, 500, 1000, 1500, 2000]);
+  assert.equal(poller.running, false);
+  await advance(2000);
+  assert.equal(asked.length, 5, 'stopped: nothing more is asked');
+});
+
+test('never two calls out: a slow answer delays the next call, it does not pile up', async (t) => {
+  const { poller, asked, pending, advance } = recorded(t, { answerAtOnce: false });
+  poller.start();
   await flush();
-  assert.deepEqual(asked, ['slow', 'fast', 'fast', 'slow']);
-  poller.pollNow('fast'); // after a command: at once
+  await advance(3000); // the first call is still out
+  assert.deepEqual(asked, [0]);
+  pending.shift()();
   await flush();
-  assert.deepEqual(asked.at(-1), 'fast');
+  await advance(STATUS_PERIOD_MS);
+  assert.deepEqual(asked, [0, 3500]);
   poller.stop();
 });
 
-test('robots that join later are polled; an empty class waits a period', async (t) => {
+test('after a command the class is asked at once, or right after the call that is out',
+  async (t) => {
+    const { poller, asked, pending, advance } = recorded(t, { answerAtOnce: false });
+    poller.start();
+    await flush();
+    pending.shift()(); // answered at 0: the next would be at 500
+    await flush();
+    await advance(100);
+    poller.pollNow(); // at 100: asked now
+    await flush();
+    assert.deepEqual(asked, [0, 100]);
+    poller.pollNow(); // the call is out: once more after it, however many commands
+    poller.pollNow();
+    await advance(50);
+    assert.deepEqual(asked, [0, 100]);
+    pending.shift()();
+    await flush();
+    assert.deepEqual(asked, [0, 100, 150]);
+    pending.shift()();
+    await flush();
+    await advance(STATUS_PERIOD_MS);
+    assert.deepEqual(asked, [0, 100, 150, 650]);
+    poller.stop();
+    poller.pollNow(); // stopped (the root is down): nothing
+    await advance(STATUS_PERIOD_MS);
+    assert.equal(asked.length, 4);
+  });
+
+test('a failing call does not stop the polling; a restart ends the old round', async (t) => {
   t.mock.timers.enable({ apis: ['setTimeout'] });
-  const names = [];
-  const asked = [];
-  const poller = new StatusPoller({ names: () => names, poll: async (n) => { asked.push(n); } });
+  let calls = 0;
+  const poller = new StatusPoller({ poll: async () => { calls += 1; throw new Error('refused'); } });
   poller.start();
-  t.mock.timers.tick(0);
   await flush();
-  assert.deepEqual(asked, []);
-  names.push('late');
+  for (let i = 0; i < 2; i += 1) {
+    t.mock.timers.tick(STATUS_PERIOD_MS);
+    await flush();
+  }
+  assert.equal(calls, 3);
+  poller.start(); // a reconnect: asked at once, one round only
+  await flush();
+  assert.equal(calls, 4);
   t.mock.timers.tick(STATUS_PERIOD_MS);
   await flush();
-  assert.deepEqual(asked, ['late']);
-  poller.stop();
-});
-
-test('a failing poll does not stop the round', async (t) => {
-  t.mock.timers.enable({ apis: ['setTimeout'] });
-  const asked = [];
-  const poller = new StatusPoller({
-    names: () => ['x'],
-    poll: async (name) => { asked.push(name); throw new Error('refused'); },
-  });
-  poller.start();
-  for (let i = 0; i < 3; i += 1) {
-    t.mock.timers.tick(i === 0 ? 0 : STATUS_PERIOD_MS);
-    await flush();
-  }
-  assert.deepEqual(asked, ['x', 'x', 'x']);
+  assert.equal(calls, 5);
   poller.stop();
 });

@@ -51,9 +51,9 @@ test('a robot lives behind the root that listed it first; its calls go there onl
   assert.equal(roots.rootOf('carol'), second);
   await roots.commands.reset('carol');
   await roots.commands.pause('alice', true);
-  await roots.commands.status('bob');
+  await roots.commands.token('bob');
   assert.deepEqual(calls, [
-    [`/alice${CLASS_SERVICES.pause.name}`, `/bob${CLASS_SERVICES.status.name}`],
+    [`/alice${CLASS_SERVICES.pause.name}`, `/bob${CLASS_SERVICES.token.name}`],
     [`/carol${robot.services.reset.name}`],
   ]);
   await assert.rejects(roots.commands.reset('dave'), /no root connection lists robot dave/);

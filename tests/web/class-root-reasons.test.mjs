@@ -6,7 +6,8 @@ import { test } from 'node:test';
 
 import { Connection, TOKEN_KEY } from '../../web-interface/js/connection.js';
 import {
-  explainClosed, explainNoRobots, NEEDS_TOKEN, observedRoslib, probeHealth,
+  explainClosed, explainNoRobots, NEEDS_TOKEN, observedRoslib, probeHealth, tokenRefused,
+  WRONG_TOKEN,
 } from '../../web-interface/js/class-root-reasons.js';
 import { forgetToken, instructorToken, storeToken } from '../../web-interface/js/class-token.js';
 import { rootWsUrl } from '../../web-interface/js/class-plan.js';
@@ -83,24 +84,43 @@ test('a silent refusal: unreachable, a single robot, or a class that wants the t
   const single = explainClosed({ url: 'ws://h:9090/', close, health: { status: 'ok' } });
   assert.match(single.text, /single robot, not a class/);
   const refused = explainClosed({ url: 'ws://h:9090/', close,
-    health: { status: 'ok', robot_count: 12 } });
+    health: { status: 'ok', robot_count: 12 } }); // a server that does not say
   assert.equal(refused.kind, 'error');
   assert.equal(refused.askToken, true);
   assert.ok(refused.text.includes(NEEDS_TOKEN));
   assert.match(NEEDS_TOKEN, /needs the instructor's token/);
+  const wrong = explainClosed({ url: 'ws://h:9090/', close,
+    health: { status: 'ok', robot_count: 12, token_accepted: false } });
+  assert.deepEqual(wrong, { kind: 'error', askToken: true, text: WRONG_TOKEN });
+  assert.match(WRONG_TOKEN, /it is not the instructor's token/);
+  const taken = explainClosed({ url: 'ws://h:9090/', close,
+    health: { status: 'ok', robot_count: 12, token_accepted: true } });
+  assert.equal(taken.askToken, false, 'the token is right: asking for it again would not help');
+  assert.match(taken.text, /takes the token but refused ws:\/\/h:9090\/: most likely this page's origin/);
   assert.match(explainNoRobots('unknown service /websim/robots').text,
     /\/websim\/robots: unknown service \/websim\/robots/);
 });
 
 test('the health probe reads the page server\'s /healthz, or says null', async () => {
   const asked = [];
-  const health = await probeHealth(async (url) => {
+  const answer = (body) => async (url) => {
     asked.push(url);
-    return { ok: true, json: async () => ({ status: 'ok', robot_count: 3 }) };
-  });
+    return { ok: true, json: async () => body };
+  };
+  const health = await probeHealth('', answer({ status: 'ok', robot_count: 3 }));
   assert.deepEqual(health, { status: 'ok', robot_count: 3 });
-  assert.deepEqual(asked, ['healthz']);
-  assert.equal(await probeHealth(async () => ({ ok: false })), null);
-  assert.equal(await probeHealth(async () => { throw new TypeError('offline'); }), null);
-  assert.equal(await probeHealth(async () => ({ ok: true, json: async () => 'x' })), null);
+  await probeHealth('T k&n', answer({}));
+  assert.deepEqual(asked, ['healthz', 'healthz?token=T%20k%26n']);
+  assert.equal(await probeHealth('', async () => ({ ok: false })), null);
+  assert.equal(await probeHealth('', async () => { throw new TypeError('offline'); }), null);
+  assert.equal(await probeHealth('', async () => ({ ok: true, json: async () => 'x' })), null);
+});
+
+test('a token is refused only when a class server says it does not take it', () => {
+  assert.equal(tokenRefused({ status: 'ok', robot_count: 3, token_accepted: false }), true);
+  assert.equal(tokenRefused({ status: 'ok', robot_count: 3, token_accepted: true }), false);
+  assert.equal(tokenRefused({ status: 'ok', robot_count: 3 }), false, 'a server that does not say');
+  assert.equal(tokenRefused({ status: 'ok', token_accepted: false }), false, 'a single robot');
+  assert.equal(tokenRefused({ status: 'ok' }), false, 'nginx\'s own /healthz');
+  assert.equal(tokenRefused(null), false, 'no answer: out of reach, not a wrong token');
 });

@@ -1,9 +1,12 @@
-// What the instructor does to robots: status, reset, pause and resume, the motion model and
-// the payload, each a service call on the root connection under the robot's namespace, and
+// What the instructor does to robots: reset, pause and resume, the motion model and the
+// payload, each a service call on the root connection under the robot's namespace (the
+// class's status is one call at the root: classStatus), and
 // the "for all" fan-out over the class. Rejections carry the server's reason (a
 // ServiceCallError from connection.js, or an Error naming the refused parameter).
 
-import { CLASS_SERVICES, namespaced, namespacedRobot, robotNames } from './class-plan.js';
+import {
+  CLASS_SERVICES, namespaced, namespacedRobot, robotNames, robotStatuses,
+} from './class-plan.js';
 import { setParameters } from './params.js';
 import { parameterSpec } from './robot.js';
 
@@ -71,9 +74,13 @@ export class ClassCommands {
     return robotNames(await this.connection.callService(name, type, {}));
   }
 
-  /** Robot `name`'s /websim/status values (parse them with class-state.js parseStatus). */
-  status(name) {
-    return this._call(name, CLASS_SERVICES.status, {});
+  /**
+   * Every robot's status behind this root (/websim/class_status on the root): a Map of name
+   * -> status values (parse them with class-state.js parseStatus).
+   */
+  async classStatus() {
+    const { name, type } = CLASS_SERVICES.classStatus;
+    return robotStatuses(await this.connection.callService(name, type, {}));
   }
 
   /** Robot `name`'s own token, to hand to its student (an open class's newly enrolled too). */

@@ -29,8 +29,8 @@ export function byName(a, b) {
 
 /** The clients line of a status: "3", or "3 (1 admin)"; the dashboard is an admin client. */
 export function clientsText(status) {
-  if (!status) return '–';
-  const total = status.clients.length;
+  if (!status || status.clientCount === null) return '–';
+  const total = status.clientCount;
   return status.admins ? `${total} (${status.admins} admin)` : `${total}`;
 }
 

@@ -3,19 +3,21 @@
 // class-root-reasons.js), where robot NAME's topics and services are under /NAME: ONE
 // WebSocket to a single process, or one per worker for a class spread over workers behind
 // nginx (class-workers.js). This module only wires the others:
-// the token (class-token.js), the robots' topics (class-feed.js), their status
-// (class-poller.js), the commands (class-commands.js) and the grid (class-grid.js), drawn in
-// one animation loop.
+// the token (class-token.js), the robots' topics (class-feed.js), their status (one call per
+// root twice a second: class-poller.js), the commands (class-commands.js) and the grid
+// (class-grid.js), drawn in one animation loop.
 
 import { ROSLIB } from './vendor.js';
 import { loadSiteConfig } from './connection.js';
 import { runFrameLoop } from './connection-bar.js';
 import { loadRobot, parameterSpec } from './robot.js';
 import { rootWsUrl } from './class-plan.js';
-import { explainNoRobots, NEEDS_TOKEN, probeHealth } from './class-root-reasons.js';
+import {
+  explainNoRobots, NEEDS_TOKEN, probeHealth, tokenRefused, WRONG_TOKEN,
+} from './class-root-reasons.js';
 import { loadWorkers, rootTargets } from './class-workers.js';
 import { ClassRoots, rootsBadge, rootsMessage } from './class-root-connections.js';
-import { bindTokenCard, instructorToken } from './class-token.js';
+import { bindTokenCard, forgetToken, instructorToken } from './class-token.js';
 import { ClassFeed } from './class-feed.js';
 import { StatusPoller } from './class-poller.js';
 import {
@@ -85,16 +87,23 @@ async function main() {
   const { commands } = roots; // each robot's calls, over the root it lives behind
   const feed = new ClassFeed(roots.list[0].connection, robot);
   const stateOf = (name) => feed.states.get(name);
-  const poller = new StatusPoller({
-    names: () => feed.names,
-    poll: async (name) => {
+  // Each root's robots' statuses, all in one call per root (/websim/class_status).
+  const pollers = new Map(roots.list.map((root) => [root, new StatusPoller({
+    poll: async () => {
+      const names = feed.names.filter((name) => roots.rootOf(name) === root);
       try {
-        onStatus(stateOf(name), await commands.status(name), performance.now());
+        const statuses = await root.commands.classStatus();
+        const nowMs = performance.now();
+        for (const name of names) {
+          const values = statuses.get(name);
+          if (values) onStatus(stateOf(name), values, nowMs);
+          else onStatusError(stateOf(name), `status: ${name} is no longer listed`);
+        }
       } catch (error) {
-        onStatusError(stateOf(name), `status: ${error.message}`);
+        for (const name of names) onStatusError(stateOf(name), `status: ${error.message}`);
       }
     },
-  });
+  })]));
 
   // One robot's actions, the card's buttons and the "for all" buttons alike.
   const defaultMode = parameterSpec(robot, PARAMETERS.mode).default;
@@ -114,7 +123,7 @@ async function main() {
         ? PAYLOAD_FACTORS[0] : PAYLOAD_FACTORS.at(-1)),
   };
   const act = (name, action, call = () => actions[action](name)) => runAction(
-    stateOf(name), action, call).finally(() => poller.pollNow(name));
+    stateOf(name), action, call).finally(() => pollers.get(roots.rootOf(name))?.pollNow());
 
   const grid = new ClassGrid($('#class-grid'), $('#robot-card'), robot, {
     robotsPath: config.robotsPath,
@@ -181,6 +190,30 @@ async function main() {
     badge.dataset.status = 'closed';
     showMessage({ kind: 'info', text: NEEDS_TOKEN });
   };
+  // The class server does not take the token: nothing is retried with it, it is not kept,
+  // and it is asked for again at once.
+  const refuseToken = () => {
+    token = ''; // first: the roots' status listeners leave the closes below alone
+    forgetToken(storage);
+    roots.close();
+    for (const root of roots.list) {
+      root.failure = null;
+      root.message = null;
+    }
+    badge.textContent = 'wrong token';
+    badge.dataset.status = 'error';
+    badge.title = WRONG_TOKEN;
+    showMessage({ kind: 'error', text: WRONG_TOKEN });
+    tokenCard.ask(true);
+  };
+  // A token is checked with the page's own server before a socket carries it: a refused
+  // handshake is, in a browser, a close without a reason, as a server out of reach is.
+  const connectWith = async (checked) => {
+    const health = await probeHealth(checked);
+    if (checked !== token) return; // another token was entered meanwhile
+    if (tokenRefused(health)) refuseToken();
+    else roots.connect(checked);
+  };
 
   // The robots: listed by each root when it opens, and again now and then.
   const noRobots = roots.list.length === 1 ? 'The class has no robots yet.'
@@ -190,6 +223,7 @@ async function main() {
       const added = feed.addRobots(roots.claim(root, await root.commands.robots()),
         root.connection);
       grid.add(added.map(stateOf));
+      if (added.length) pollers.get(root).pollNow(); // their first status now, not in a period
       root.listed = true;
       root.message = null;
       classMessage = feed.names.length === 0 ? { kind: 'info', text: noRobots } : null;
@@ -210,7 +244,7 @@ async function main() {
         root.message = null;
       }
       if (token) {
-        roots.connect(token);
+        connectWith(token);
       } else {
         roots.close();
         noToken();
@@ -231,8 +265,12 @@ async function main() {
         render();
         return;
       }
-      const health = await probeHealth();
+      const health = await probeHealth(token);
       if (connection.isConnected || !token) return; // it opened while the server was asked
+      if (tokenRefused(health)) { // the server no longer takes it (restarted with another)
+        refuseToken();
+        return;
+      }
       root.failure = { close, health };
       root.message = null;
       render();
@@ -241,12 +279,12 @@ async function main() {
       root.message = { kind: 'info', text: 'Connected; asking for the class\'s robots…' };
       render();
       loadRobots(root);
-      if (!poller.running) poller.start();
+      pollers.get(root).start();
       clearInterval(robotsTimer);
       robotsTimer = setInterval(() => loadRobots(root), ROBOTS_REFRESH_MS);
     });
     connection.addEventListener('disconnected', () => {
-      if (!roots.anyConnected(root)) poller.stop();
+      pollers.get(root).stop();
       clearInterval(robotsTimer);
     });
   }
@@ -261,10 +299,10 @@ async function main() {
   window.addEventListener('pageshow', (event) => {
     if (event.persisted && token) roots.connect();
   });
-  window.websim = { roots, robot, feed, grid, poller, commands }; // for the console
+  window.websim = { roots, robot, feed, grid, pollers, commands }; // for the console
 
   if (token) {
-    roots.connect();
+    connectWith(token);
   } else {
     noToken();
     tokenCard.ask(true);

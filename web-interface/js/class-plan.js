@@ -11,7 +11,8 @@ import { defaultWsUrl, ownWsUrl } from './connection.js';
 /** Services of the root connection and, under each robot's namespace, of each robot. */
 export const CLASS_SERVICES = Object.freeze({
   robots: Object.freeze({ name: '/websim/robots', type: 'websim/srv/Robots' }), // root: names
-  status: Object.freeze({ name: '/websim/status', type: 'websim/srv/RobotStatus' }), // per robot
+  // root: every robot's status at once, {robots: [{name, ...status}]}
+  classStatus: Object.freeze({ name: '/websim/class_status', type: 'websim/srv/ClassStatus' }),
   pause: Object.freeze({ name: '/websim/pause', type: 'websim/srv/Pause' }), // per robot
   token: Object.freeze({ name: '/websim/token', type: 'websim/srv/RobotToken' }), // per robot
 });
@@ -108,4 +109,16 @@ export function robotNames(response) {
   if (!Array.isArray(names)) throw new TypeError('the robot list has no names');
   const valid = names.filter((name) => typeof name === 'string' && ROBOT_NAME.test(name));
   return [...new Set(valid)];
+}
+
+/**
+ * The statuses of a /websim/class_status answer: a Map of robot name -> its status values
+ * (class-state.js parseStatus reads them), for the entries with a valid name.
+ */
+export function robotStatuses(response) {
+  const robots = response?.robots;
+  if (!Array.isArray(robots)) throw new TypeError('the class status has no robots');
+  return new Map(robots
+    .filter((entry) => typeof entry?.name === 'string' && ROBOT_NAME.test(entry.name))
+    .map((entry) => [entry.name, entry]));
 }

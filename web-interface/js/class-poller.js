@@ -1,73 +1,78 @@
-// Polls every robot's status about every STATUS_PERIOD_MS, staggered: one robot every
-// period / N, round the class, so a class of 40 costs the bridge a call every 50 ms rather than
-// 40 at once every 2 s. A robot whose last call has not been answered is skipped, so a slow
-// robot never piles calls up. Timers are passed in: the schedule is testable in Node.
+// The class's status, asked of one root connection twice a second: one call,
+// /websim/class_status, answers for every robot behind that root, so a class of 30 or 100 is
+// as fresh as a class of one. (The dashboard used to ask each robot in turn, a round of about
+// 2 s: a robot's last command aged past the 2 s "driving" window between two of its calls, so
+// of 30 robots driven at 10 Hz only 19 to 29 counted as driving, and "driving ... (1.9 s ago)"
+// lagged by up to the round.) Never two calls out at once: the next is asked STATUS_PERIOD_MS
+// after the answer, and pollNow() (after a command) asks at once, or right after the call
+// that is out. Timers are passed in: the schedule is testable in Node.
 
-/** Each robot's status is asked for about this often (ms). */
-export const STATUS_PERIOD_MS = 2000;
-/** The shortest time between two status calls (ms), however large the class. */
-export const MIN_POLL_GAP_MS = 20;
-
-/** Time between two calls (ms) for a class of `count`. */
-export function pollGapMs(count, periodMs = STATUS_PERIOD_MS) {
-  return Math.max(MIN_POLL_GAP_MS, periodMs / Math.max(1, count));
-}
+/** The class's status is asked for this long after the last answer (ms). */
+export const STATUS_PERIOD_MS = 500;
 
 export class StatusPoller {
   /**
-   * @param {{names: () => string[], poll: (name: string) => Promise<unknown>,
-   *          periodMs?: number, timers?: {setTimeout: Function, clearTimeout: Function}}} options
-   *   names: the robots now; poll: asks one robot (its answer and errors are the caller's)
+   * @param {{poll: () => Promise<unknown>, periodMs?: number,
+   *          timers?: {setTimeout: Function, clearTimeout: Function}}} options
+   *   poll: asks once (its answer and its errors are the caller's)
    */
-  constructor({ names, poll, periodMs = STATUS_PERIOD_MS, timers = globalThis }) {
-    this.names = names;
+  constructor({ poll, periodMs = STATUS_PERIOD_MS, timers = globalThis }) {
     this.poll = poll;
     this.periodMs = periodMs;
     this.timers = timers;
-    this.inFlight = new Set();
-    this._cursor = 0;
+    this.inFlight = false;
+    this._again = false; // pollNow() while a call was out: ask again once it is answered
+    this._round = 0; // start() and stop() end the rounds before them
+    this._running = false;
     this._timer = null;
   }
 
   get running() {
-    return this._timer !== null;
+    return this._running;
   }
 
-  /** Starts (or restarts) the round at the first robot. */
+  /** Asks now, then every period after each answer. */
   start() {
     this.stop();
-    this._cursor = 0;
-    this._schedule(0);
+    this._running = true;
+    this._ask(this._round);
   }
 
   stop() {
-    if (this._timer !== null) this.timers.clearTimeout(this._timer);
+    this.timers.clearTimeout(this._timer);
     this._timer = null;
+    this._running = false;
+    this.inFlight = false; // a call still out is the ended round's: its answer is not waited for
+    this._again = false;
+    this._round += 1;
   }
 
-  /** Asks robot `name` now (after a command changed it), unless a call is already out. */
-  pollNow(name) {
-    if (this.inFlight.has(name)) return;
-    this.inFlight.add(name);
-    Promise.resolve()
-      .then(() => this.poll(name))
-      .catch(() => {}) // the caller's poll reports its own errors
-      .finally(() => this.inFlight.delete(name));
-  }
-
-  _schedule(delayMs) {
-    this._timer = this.timers.setTimeout(() => this._tick(), delayMs);
-  }
-
-  _tick() {
-    const names = this.names();
-    if (names.length === 0) {
-      this._schedule(this.periodMs);
+  /** Asks now (after a command changed a robot), or right after the call that is out. */
+  pollNow() {
+    if (!this._running) return;
+    if (this.inFlight) {
+      this._again = true;
       return;
     }
-    const name = names[this._cursor % names.length];
-    this._cursor = (this._cursor + 1) % names.length;
-    this.pollNow(name);
-    this._schedule(pollGapMs(names.length, this.periodMs));
+    this.timers.clearTimeout(this._timer);
+    this._ask(this._round);
+  }
+
+  _ask(round) {
+    this._timer = null;
+    this.inFlight = true;
+    Promise.resolve()
+      .then(() => this.poll())
+      .catch(() => {}) // the caller's poll reports its own errors
+      .finally(() => {
+        if (round !== this._round) return; // stopped, or started again, meanwhile
+        this.inFlight = false;
+        if (this._again) {
+          this._again = false;
+          this._ask(round);
+        } else {
+          this._timer = this.timers.setTimeout(() => this._ask(round), this.periodMs);
+        }
+      });
   }
 }

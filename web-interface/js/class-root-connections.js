@@ -12,12 +12,12 @@ import { explainClosed, explainWorkerClosed, observedRoslib } from './class-root
 const SEVERITY = Object.freeze({ ok: 0, info: 1, warn: 2, error: 3 });
 
 /**
- * ClassCommands' per-robot calls (status, reset, pause, setMode, setPayload, token), each
- * sent to the ClassCommands `commandsOf(name)` gives; a name it throws for rejects.
+ * ClassCommands' per-robot calls (reset, pause, setMode, setPayload, token), each sent to the
+ * ClassCommands `commandsOf(name)` gives; a name it throws for rejects.
  */
 export function routedCommands(commandsOf) {
   const route = (method) => async (name, ...args) => commandsOf(name)[method](name, ...args);
-  return Object.freeze(Object.fromEntries(['status', 'reset', 'pause', 'setMode', 'setPayload',
+  return Object.freeze(Object.fromEntries(['reset', 'pause', 'setMode', 'setPayload',
     'token'].map((method) => [method, route(method)])));
 }
 
@@ -89,11 +89,6 @@ export class ClassRoots {
 
   close() {
     for (const root of this.list) root.connection.close();
-  }
-
-  /** Whether a root other than `except` is connected. */
-  anyConnected(except = null) {
-    return this.list.some((root) => root !== except && root.connection.isConnected);
   }
 }
 

@@ -85,22 +85,25 @@ const finiteOrNull = (value) => (Number.isFinite(value) ? value : null);
 const boolOrNull = (value) => (typeof value === 'boolean' ? value : null);
 const textOrNull = (value) => (typeof value === 'string' && value ? value : null);
 
+/** A count: a non-negative integer, else null. */
+const countOrNull = (value) => (Number.isInteger(value) && value >= 0 ? value : null);
+
 /**
- * A /websim/status answer as the dashboard reads it: {clients: [{address, admin}], students,
- * admins, lastDriver, lastDriveAgeS, collisions, mode, massKg, inertiaKgM2, paused, held,
- * speedMps}. A field that is missing or of the wrong type reads null (clients: []). `held` is
- * the instructor's pause; a server that does not tell it apart from `paused` (an idle robot
- * pauses too) gets `paused` for it.
+ * A robot's status (an entry of /websim/class_status, or a /websim/status answer) as the
+ * dashboard reads it: {clientCount, admins, students, lastDriver, lastDriveAgeS, collisions,
+ * mode, massKg, inertiaKgM2, paused, held, speedMps}. A field that is missing or of the wrong
+ * type reads null. `admins` are the clients with the robot's or the instructor's token (the
+ * dashboard is one), `students` the others. `held` is the instructor's pause; a server that
+ * does not tell it apart from `paused` (an idle robot pauses too) gets `paused` for it.
  */
 export function parseStatus(values) {
-  const clients = (Array.isArray(values?.clients) ? values.clients : [])
-    .filter((client) => client && typeof client.address === 'string')
-    .map((client) => ({ address: client.address, admin: client.admin === true }));
+  const clientCount = countOrNull(values?.client_count);
+  const admins = countOrNull(values?.admin_count);
   const paused = boolOrNull(values?.paused);
   return {
-    clients,
-    students: clients.filter((client) => !client.admin).length,
-    admins: clients.filter((client) => client.admin).length,
+    clientCount,
+    admins,
+    students: clientCount === null || admins === null ? null : Math.max(0, clientCount - admins),
     lastDriver: textOrNull(values?.last_driver),
     lastDriveAgeS: finiteOrNull(values?.last_drive_age_s),
     collisions: Number.isInteger(values?.collisions) ? values.collisions : null,
@@ -166,7 +169,9 @@ export function driveAgeS(state, nowMs) {
 
 /**
  * Who drives the robot: {kind, text}. kind none (nobody ever), recent (a command in the last
- * DRIVING_RECENT_S, or the robot still moves on its last command: it keeps it) or past.
+ * DRIVING_RECENT_S, or the robot still moves on its last command: it keeps it) or past. The
+ * status is asked for twice a second (class-poller.js), so a robot driven at 10 Hz reads
+ * well under a second ago and never leaves the window between two answers.
  */
 export function driverLine(state, nowMs) {
   const driver = state.status?.lastDriver;
