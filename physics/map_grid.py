@@ -120,8 +120,7 @@ def grid_over(bounds: tuple[float, float, float, float], resolution_m: float,
 
 
 def default_resolution_m(bounds: tuple[float, float, float, float]) -> float:
-    """The resolution of a world that names none: ``DEFAULT_MAP_RESOLUTION_M``, or for a
-    world too large for it the finest that fits ``MAX_MAP_CELLS``."""
+    """A world's resolution when it names none: the default, or the finest that fits."""
     min_x, min_y, max_x, max_y = bounds
     return max(DEFAULT_MAP_RESOLUTION_M, _finest_resolution_m(max_x - min_x, max_y - min_y))
 

@@ -316,5 +316,5 @@ def test_a_large_world_that_names_no_resolution_gets_the_finest_that_fits(tmp_pa
     small.write_text("walls: [[0, 0, 5, 0]]\nstart: [1, 1, 0]\n")
     assert load_world(small).map_resolution_m == 0.05
     path.write_text(path.read_text() + "map_resolution_m: 0.05\n")
-    with pytest.raises(ConfigError, match="use 0.15 m or coarser"):
+    with pytest.raises(ConfigError, match=r"use 0\.15 m or coarser"):
         load_world(path)
