@@ -28,6 +28,7 @@ from typing import Any
 from classroom.state import SAVE_INTERVAL_S, ClassState
 from physics import TICK_PERIOD_S, ConfigError, load_world
 from physics.snapshots import Pose2D
+from ros_nodes.recording import Recorder
 from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
 from ros_nodes.robot_services import require_admin
 from ros_nodes.sensors import Sensor
@@ -204,6 +205,7 @@ class Classroom:
             secret, nothing kept.
         latched: the server's pool of clients' latched messages, each robot's within it
             (default: one of the default sizes).
+        recorder: records every robot from its creation on (``--record``); None: none.
     """
 
     def __init__(self, roster: list[Student], make_robot: Callable[[Student], VirtualRobot],
@@ -212,7 +214,9 @@ class Classroom:
                  idle_pause_s: float | None = DEFAULT_IDLE_PAUSE_S,
                  make_token: Callable[[str], str] | None = None, lazy: bool = False,
                  clock: Clock | None = None, state: ClassState | None = None,
-                 latched: LatchedBytes | None = None) -> None:
+                 latched: LatchedBytes | None = None,
+                 recorder: Recorder | None = None) -> None:
+        self._recorder = recorder
         self.clock: Clock = WallClock() if clock is None else clock
         """The class's one clock (its robots' too)."""
         self.schedule = schedule or Schedule(TICK_PERIOD_S, self.clock)
@@ -269,6 +273,8 @@ class Classroom:
             except (ConfigError, KeyError, TypeError, ValueError) as error:
                 log.error("robot %s: its saved state could not be restored (%s); it starts "
                           "at its spawn pose", name, error)
+        if self._recorder is not None:
+            host.recording = self._recorder.record(name, host.robot)
         return host
 
     def __iter__(self) -> Iterator[tuple[str, RobotHost]]:

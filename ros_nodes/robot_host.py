@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from physics import TICK_PERIOD_S, ConfigError
+from ros_nodes.recording import Recording
 from ros_nodes.robot_endpoint import RobotEndpoint
 from ros_nodes.robot_interface import (
     RESERVED_NAMESPACES,
@@ -138,6 +139,8 @@ class RobotHost:
         self.schedule = schedule or Schedule(TICK_PERIOD_S, clock)
         self.held = False
         """Paused by an admin (``/websim/pause``), whoever is connected."""
+        self.recording: Recording | None = None
+        """Its rosbag2 recording (``--record``), if any: /healthz reports it."""
         self._idle_pause_s = idle_pause_s
         self._clock = clock
         self._last_client_s = clock.monotonic_s()
@@ -323,5 +326,7 @@ class RobotHost:
             "world": self.robot.sim.world.name,
             "last_driver": self.endpoint.last_driver,
         }
+        if self.recording is not None:
+            report["recording"] = self.recording.health()
         report.update(self.faults.report())
         return report

@@ -11,6 +11,33 @@ from physics import TICK_PERIOD_S
 
 
 @dataclass(frozen=True)
+class QosProfile:
+    """The QoS a topic's publisher offers (the values rclpy's profiles have).
+
+    Attributes:
+        reliability: ``"reliable"`` or ``"best_effort"``.
+        durability: ``"volatile"`` or ``"transient_local"`` (late subscribers get the last
+            ``depth`` messages).
+        depth: the history kept (keep last N).
+    """
+
+    reliability: str
+    durability: str
+    depth: int
+
+
+QOS_PROFILES = {
+    "reliable": QosProfile("reliable", "volatile", 10),
+    "sensor_data": QosProfile("best_effort", "volatile", 5),
+    "transient_local": QosProfile("reliable", "transient_local", 1),
+}
+"""``TopicSpec.qos`` -> what its publisher offers: ``reliable`` is ROS 2's default profile,
+``sensor_data`` rclpy's ``qos_profile_sensor_data`` (as lidar drivers publish), and
+``transient_local`` what tf2's static broadcaster offers. The rclpy node publishes with these
+and a recording (``ros_nodes.recording``) writes them as the topic's ``offered_qos_profiles``."""
+
+
+@dataclass(frozen=True)
 class TopicSpec:
     """One topic of the virtual robot.
 
@@ -25,6 +52,8 @@ class TopicSpec:
         description: what it carries.
         event: published when something happens (a log line, a parameter change), not per
             tick and not latched.
+        recorded: ``websim serve --record`` writes it to the robot's rosbag2 (what the robot
+            publishes and what it accepts, as they cross its tap, ``ros_nodes.tap``).
     """
 
     name: str
@@ -34,6 +63,7 @@ class TopicSpec:
     qos: str
     description: str
     event: bool = False
+    recorded: bool = True
 
     @property
     def rate_hz(self) -> float:
@@ -44,6 +74,11 @@ class TopicSpec:
     def latched(self) -> bool:
         """True for topics sent once to every subscriber."""
         return self.direction == "out" and self.every_ticks == 0 and not self.event
+
+    @property
+    def qos_profile(self) -> QosProfile:
+        """What its publisher offers (``QOS_PROFILES``)."""
+        return QOS_PROFILES[self.qos]
 
 
 CMD_VEL = TopicSpec("/cmd_vel", "geometry_msgs/msg/Twist", "in", 0, "reliable",
@@ -84,6 +119,10 @@ ROBOT_TOPICS = (CMD_VEL, ODOM, SCAN, TF, TF_STATIC, GROUND_TRUTH, WORLD, MAP, JO
 
 PUBLISHED_TOPICS = tuple(spec for spec in ROBOT_TOPICS if spec.direction == "out")
 """Topics only the simulator may publish."""
+
+RECORDED_TOPICS = tuple(spec for spec in ROBOT_TOPICS if spec.recorded)
+"""What ``--record`` writes: every topic of the robot (a new one is recorded once it is in
+``ROBOT_TOPICS`` and crosses the robot's tap), unless its spec says ``recorded=False``."""
 
 ROBOTS_PREFIX = "/robots/"
 """Where a class's robots are: robot NAME at ``ws://HOST:9090/robots/NAME``, its page at

@@ -43,12 +43,7 @@ try:
     from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
     from rclpy.parameter import Parameter
-    from rclpy.qos import (
-        DurabilityPolicy,
-        QoSProfile,
-        ReliabilityPolicy,
-        qos_profile_sensor_data,
-    )
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from std_srvs.srv import Empty
 except ImportError as error:  # pragma: no cover - depends on the installation
     raise ImportError(f"{error}: the virtual_robot node needs rclpy and the ROS message "
@@ -124,19 +119,19 @@ def relative(name: str) -> str:
 
 
 def qos_profile(spec: TopicSpec) -> QoSProfile:
-    """The QoS a topic of the robot is published with (``TopicSpec.qos``).
+    """The QoS a topic of the robot is published with (``TopicSpec.qos_profile``).
 
-    ``sensor_data`` is rclpy's profile (best effort, depth 5), as lidar drivers use;
-    ``transient_local`` keeps the last message for late subscribers, as tf2's static
-    broadcaster does; ``reliable`` is the ROS default (depth 10).
+    ``sensor_data`` is rclpy's ``qos_profile_sensor_data`` (best effort, depth 5), as lidar
+    drivers use; ``transient_local`` keeps the last message for late subscribers, as tf2's
+    static broadcaster does; ``reliable`` is the ROS default (depth 10).
     """
-    if spec.qos == "sensor_data":
-        return qos_profile_sensor_data
-    if spec.qos == "transient_local":
-        return QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    return QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.VOLATILE)
+    offered = spec.qos_profile
+    return QoSProfile(
+        depth=offered.depth,
+        reliability=ReliabilityPolicy.BEST_EFFORT if offered.reliability == "best_effort"
+        else ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if offered.durability == "transient_local"
+        else DurabilityPolicy.VOLATILE)
 
 
 def descriptor(spec: ParameterSpec) -> ParameterDescriptor:

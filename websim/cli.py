@@ -221,10 +221,11 @@ def _run_serve(args: argparse.Namespace) -> int:
                           "this process's port with the proxy's")
     limits, origins = serve_command.limits_from(args), serve_command.origins_from(args)
     clock = make_clock(args.speed)  # the one clock of the server: every robot's, the class's
+    recorder = serve_command.recorder_from(args)
     if args.class_spec is None:
         robot = VirtualRobot(make_simulation(args), clock, localization=args.localization)
         site = sites.single_robot(robot, token, limits, origins,
-                                  args.public_ws_port or args.ws_port)
+                                  args.public_ws_port or args.ws_port, recorder)
         return serve_command.run(args, site, token)
 
     def make_robot(student: Student) -> VirtualRobot:
@@ -235,8 +236,8 @@ def _run_serve(args: argparse.Namespace) -> int:
 
     platform = load_params(args.params)
     return serve_command.run(args, sites.classroom_site(
-        args, make_robot, (platform.robot, platform.lidar), token, limits, origins, clock),
-        token)
+        args, make_robot, (platform.robot, platform.lidar), token, limits, origins, clock,
+        recorder), token)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -28,6 +28,7 @@ from classroom.registry import DEFAULT_IDLE_PAUSE_S, DEFAULT_MAX_ROBOTS
 from physics import TICK_PERIOD_S, ConfigError
 from physics.shipped import shipped
 from physics.world import LOCALIZATIONS
+from ros_nodes.recording import DEFAULT_MAX_MB, Recorder
 from ros_nodes.robot_interface import NODE_NAME
 from ros_nodes.robot_server import SimServer
 from rosbridge.core.clock import SPEED_MAX
@@ -163,6 +164,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the host name or address students reach (this machine's on "
                              "the network, or a proxy's), for the links file (default: this "
                              "machine's name with --host 0.0.0.0, else --host)")
+    parser.add_argument("--record", type=Path, default=None, metavar="DIR",
+                        help="record every robot to a rosbag2 of its own (MCAP storage: ros2 "
+                             "bag, Foxglove and Lichtblick open it) in DIR/NAME_<UTC time>/ "
+                             "(NAME 'robot' for a single robot); see docs/recording.md")
+    parser.add_argument("--record-max-mb", type=_positive(float), default=DEFAULT_MAX_MB,
+                        metavar="MB",
+                        help="with --record: a robot's bag reaching this size on disk is "
+                             f"closed and recording it stops (default {DEFAULT_MAX_MB:g})")
     parser.add_argument("--ros", action="store_true",
                         help="also run the virtual_robot node on the ROS 2 graph and relay "
                              "rosbridge topics to it (needs rclpy: pip install '.[ros]')")
@@ -292,6 +301,8 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
             return 1
     for signum in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(signum, stop.set)
+    if site.recorder is not None:
+        site.recorder.start()
     tasks = [asyncio.create_task(server.run_ticks())]
     if ros is not None:
         tasks.append(asyncio.create_task(_poll_graph(ros)))
@@ -361,6 +372,9 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     await websocket.wait_closed()
     await http.close()
     site.close()
+    if site.recorder is not None:
+        for line in site.recorder.summary_lines():
+            print(f"websim: recorded {line}", flush=True)
     print("websim: stopped", flush=True)
     return 0
 
@@ -506,18 +520,41 @@ def redact_tokens(*secrets: str) -> None:
         handler.addFilter(RedactTokens(secrets))
 
 
+def recorder_from(args: argparse.Namespace) -> Recorder | None:
+    """The recorder ``--record DIR`` asks for (None without it).
+
+    Raises:
+        ConfigError: DIR cannot be made or written.
+    """
+    directory: Path | None = getattr(args, "record", None)
+    if directory is None:
+        return None
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise ConfigError(f"--record {directory}: cannot make the folder: "
+                          f"{error.strerror}") from None
+    if not directory.is_dir() or not os.access(directory, os.W_OK | os.X_OK):
+        raise ConfigError(f"--record {directory}: not a folder this user can write")
+    return Recorder(directory, max_bytes=int(args.record_max_mb * 1e6))
+
+
 def run(args: argparse.Namespace, site: Site, token: str) -> int:
     """Entry point of ``websim serve`` after the robots were built."""
     logging.basicConfig(level=args.log_level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     redact_tokens(token)
-    if args.event_loop == "uvloop":
-        if importlib.util.find_spec("uvloop") is None:
-            print("websim: error: --event-loop uvloop: uvloop is not installed "
-                  "(pip install uvloop)", file=sys.stderr)
-            return 2
-        import uvloop
+    try:
+        if args.event_loop == "uvloop":
+            if importlib.util.find_spec("uvloop") is None:
+                print("websim: error: --event-loop uvloop: uvloop is not installed "
+                      "(pip install uvloop)", file=sys.stderr)
+                return 2
+            import uvloop
 
-        exit_code: int = uvloop.run(serve_forever(args, site, token))
-        return exit_code
-    return asyncio.run(serve_forever(args, site, token))
+            exit_code: int = uvloop.run(serve_forever(args, site, token))
+            return exit_code
+        return asyncio.run(serve_forever(args, site, token))
+    finally:
+        if site.recorder is not None:  # every bag closed properly, however the server ended
+            site.recorder.close()

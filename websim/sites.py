@@ -26,6 +26,7 @@ from classroom.registry import (
 )
 from classroom.state import ClassState, class_identity, default_state_path
 from physics import ConfigError, LidarParams, RobotParams
+from ros_nodes.recording import SINGLE_ROBOT_NAME, Recorder
 from ros_nodes.robot_description import robot_json
 from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
 from ros_nodes.robot_interface import ROBOTS_PREFIX
@@ -48,6 +49,7 @@ class Site:
             own, or a proxy's (``--public-ws-port``).
         classroom: the class (None for a single robot).
         new_robot_json: ``robot.json`` of a class robot not created yet.
+        recorder: the robots' recordings (``--record``), if any.
     """
 
     front: WebSocketFront
@@ -56,9 +58,12 @@ class Site:
     ws_port: int = 9090
     classroom: Classroom | None = None
     new_robot_json: str | None = None
+    recorder: Recorder | None = None
 
     def close(self) -> None:
-        """Save a class's state and release its file (at shutdown)."""
+        """Close the recordings, save a class's state and release its file (at shutdown)."""
+        if self.recorder is not None:
+            self.recorder.close()
         if self.classroom is not None and self.classroom.state is not None:
             self.classroom.save()
             self.classroom.state.close()
@@ -116,7 +121,8 @@ class Site:
 
 
 def single_robot(robot: VirtualRobot, token: str, limits: ClientLimits,
-                 origins: OriginPolicy, ws_port: int = 9090) -> Site:
+                 origins: OriginPolicy, ws_port: int = 9090,
+                 recorder: Recorder | None = None) -> Site:
     """Today's websim: one robot at ``ws://HOST:9090/``.
 
     Args:
@@ -125,9 +131,15 @@ def single_robot(robot: VirtualRobot, token: str, limits: ClientLimits,
         limits: the bounds every client lives within.
         origins: which web pages may connect.
         ws_port: where the pages are told its bridge is: the server's port, or a proxy's.
+        recorder: records the robot (``--record``); None: nothing is recorded.
     """
-    return Site(SimServer(robot, token, limits=limits, origins=origins), robot=robot,
-                ws_port=ws_port)
+    server = SimServer(robot, token, limits=limits, origins=origins)
+    site = Site(server, robot=robot, ws_port=ws_port, recorder=recorder)
+    if recorder is not None:
+        recording = recorder.record(SINGLE_ROBOT_NAME, robot)
+        server.host.recording = recording
+        site.banner.append(f"recording: {recording.path}/ (rosbag2, MCAP storage)")
+    return site
 
 
 def class_roster(spec: str) -> list[Student]:
@@ -140,7 +152,7 @@ def class_roster(spec: str) -> list[Student]:
 def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], VirtualRobot],
                    new_robot_params: tuple[RobotParams, LidarParams], token: str,
                    limits: ClientLimits, origins: OriginPolicy,
-                   clock: Clock | None = None) -> Site:
+                   clock: Clock | None = None, recorder: Recorder | None = None) -> Site:
     """A class: robot NAME at ``ws://HOST:9090/robots/NAME``, its page at ``/robots/NAME/``.
 
     Writes the links file when ``--links`` asks for one.
@@ -154,6 +166,7 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
         limits: the bounds every client lives within.
         origins: which web pages may connect.
         clock: the server's one clock, the robots' too. Default: wall time.
+        recorder: records every robot (``--record``); None: nothing is recorded.
 
     Raises:
         ConfigError: a bad roster or world (the message names the file and line).
@@ -167,7 +180,8 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
         classroom = Classroom(roster, make_robot, open_class=args.open_class,
                               max_robots=args.max_robots, idle_pause_s=args.idle_pause,
                               lazy=args.worker, clock=clock, state=state,
-                              latched=LatchedBytes.for_server(limits))
+                              latched=LatchedBytes.for_server(limits),
+                              recorder=recorder)
     except BaseException:
         state.close()
         raise
@@ -175,7 +189,7 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
     site = Site(ClassServer(classroom, token, limits=limits, origins=origins,
                             open_drive=open_drive),
                 ws_port=args.public_ws_port or args.ws_port, classroom=classroom,
-                new_robot_json=robot_json(*new_robot_params))
+                new_robot_json=robot_json(*new_robot_params), recorder=recorder)
     names = list(classroom.students)
     notes = [note for note, wanted in (("new names enrol (open class)", args.open_class),
                                        ("a worker: a robot is made when first routed here",
@@ -188,6 +202,9 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
     site.banner.append(f"state:     {state.path} ("
                        + ("restored: robots as they were, same tokens" if state.restored
                           else "new: saved every few seconds; --fresh starts over") + ")")
+    if recorder is not None:
+        site.banner.append(f"recording: {recorder.directory}/NAME_<UTC time>/ per robot "
+                           "(rosbag2, MCAP storage)")
     if args.links is not None:
         host = getattr(args, "public_host", None) or public_host(args.host)
         write_links(Path(args.links), classroom, host,

@@ -34,8 +34,12 @@ class CdrError(ValueError):
 
 
 @functools.cache
-def _typestore() -> Any:
-    """The typestore of ``definitions``, with the shipped definitions (built once)."""
+def typestore() -> Any:
+    """The typestore of ``definitions``, with the shipped definitions (built once).
+
+    What messages are serialized with, and where a recording takes each type's definition
+    and hash from (``rosbags.typesys.store.Typestore``; do not register types in it).
+    """
     store = get_typestore(definitions.TYPESTORE)
     store.register(definitions.shipped_definitions())
     return store
@@ -43,7 +47,7 @@ def _typestore() -> Any:
 
 def serializable(type_name: str) -> bool:
     """Whether messages of ``type_name`` can be serialized here."""
-    return type_name in _typestore().fielddefs
+    return type_name in typestore().fielddefs
 
 
 def to_cdr(type_name: str, msg: Any) -> bytes:
@@ -55,7 +59,7 @@ def to_cdr(type_name: str, msg: Any) -> bytes:
     if not serializable(type_name):
         raise CdrError(f"{type_name} is not a type websim can serialize (cbor-raw needs one "
                        "of its standard message types)")
-    store = _typestore()
+    store = typestore()
     try:
         return bytes(store.serialize_cdr(_build(store, type_name, msg), type_name))
     except (KeyError, TypeError, ValueError, OverflowError, AttributeError) as error:
