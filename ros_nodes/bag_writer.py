@@ -23,6 +23,8 @@ rosbags 0.11 leaves out two things rosbag2's MCAP plugin writes, filled in here:
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import errno
 import os
 from collections import Counter
 from collections.abc import Mapping
@@ -42,7 +44,7 @@ from rosbags.interfaces import (
     QosReliability,
     QosTime,
 )
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.rosbag2.storage_mcap import Channel, McapWriter, write_channel, write_string
 
@@ -84,7 +86,19 @@ def offered_qos(profile: QosProfile) -> Qos:
 
 
 class _McapStorage(McapWriter):
-    """rosbags' MCAP storage, with the channel's type hash and the bag's ROS distribution."""
+    """rosbags' MCAP storage, with the channel's type hash and the bag's ROS distribution.
+
+    Attributes:
+        messages_in_file: messages in the chunks written to the file so far.
+    """
+
+    messages_in_file = 0
+
+    def close_chunk(self) -> None:
+        """Write the pending chunk; count its messages once it is written."""
+        pending = sum(len(messages) for messages in self.chunk.msgs.values())
+        super().close_chunk()
+        self.messages_in_file += pending
 
     def add_connection(self, connection: Connection, offered_qos_profiles: str) -> None:
         """A channel with ``offered_qos_profiles`` and ``topic_type_hash``, as rosbag2's."""
@@ -174,8 +188,9 @@ class BagWriter:
             self._writer.set_custom_data(key, value)
         try:
             self._writer.open()
-        except Exception as error:  # rosbags' WriterError for an existing folder
-            raise OSError(f"{path}: {error}") from None
+        except WriterError:  # rosbags never overwrites a bag
+            raise FileExistsError(errno.EEXIST, "the bag's folder exists already",
+                                  str(path)) from None
         self._connections: dict[tuple[str, str], Connection] = {}
         self._counts: Counter[str] = Counter()
         self.complete = False
@@ -222,11 +237,15 @@ class BagWriter:
     def abort(self) -> BagSummary:
         """Give up on the bag (writing failed): close its file as it is; what it holds.
 
-        What its file's buffer held is lost if it cannot be written either (a full disk).
+        Its summary counts the messages of the chunks written before (what a reader of the
+        file up to where it ends finds, at best).
         """
+        storage = self._writer.storage
+        in_file = cast(_McapStorage, storage).messages_in_file if storage is not None else 0
         with contextlib.suppress(OSError):  # the file is closed even if its flush fails
             self._writer.abort()
-        return self.summary()
+        summary = self.summary()
+        return dataclasses.replace(summary, messages=min(summary.messages, in_file))
 
     def summary(self) -> BagSummary:
         """What the bag holds now."""

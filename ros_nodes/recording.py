@@ -11,9 +11,16 @@ else happens elsewhere: a feeder thread takes the queues every ``FLUSH_PERIOD_S`
 them, pickled in small batches, to a writer process (``ros_nodes.recording_writer``), which
 serializes them to CDR and writes the bags. A process, not a thread: serializing is pure
 Python, and a busy thread would take the interpreter lock from the ticks for up to its 5 ms
-switch interval each time. A bag that cannot go on (a full disk, ``--record-max-mb``) stops
-alone, with one log line; the simulation and the other recordings go on. ``close`` (at
-shutdown) writes what is queued and closes every bag properly.
+switch interval each time. What a recording still costs the server's process besides the
+tap: the feeder's pickling (about 10 µs a message, in batches that hold the lock for well
+under a millisecond) and the garbage collector's visits to messages kept until the feeder
+takes them (measured at 40 robots: ``benchmarks/bench_recording.py``).
+
+A bag that cannot go on (a full disk, ``--record-max-mb``) stops alone, with one log line;
+the simulation and the other recordings go on. ``close`` (at shutdown) writes what is queued
+and closes every bag properly; if the server dies instead, the writer closes every bag when
+its pipe ends. The writer is a ``spawn`` process: a script that starts a ``Recorder`` must
+guard its main code with ``if __name__ == "__main__"`` (``websim``'s entry points do).
 
 Bags are ``DIR/NAME_YYYYmmddTHHMMSSZ/`` (the robot's name, ``robot`` for a single robot, and
 the UTC time it started), as rosbag2 lays a bag out: ``metadata.yaml`` and one ``.mcap``.
@@ -45,10 +52,10 @@ MAX_QUEUED_MESSAGES = 1000
 """Messages one recording keeps waiting for the writer (about 14 s of a robot's 70 per
 second); beyond it new messages are dropped and counted, never waited for."""
 
-FLUSH_PERIOD_S = 0.1
+FLUSH_PERIOD_S = 0.05
 """How often the feeder hands the queued messages to the writer process."""
 
-BATCH_MESSAGES = 64
+BATCH_MESSAGES = 32
 """Most messages pickled and piped at once (each pickling holds the interpreter lock)."""
 
 CLOSE_TIMEOUT_S = 30.0
@@ -266,16 +273,26 @@ class Recorder:
                 return
 
     def _flush(self) -> None:
+        """Pipe every queued message to the writer, in batches of ``BATCH_MESSAGES``.
+
+        A batch takes several robots' messages: each pickling holds the interpreter lock
+        (about 10 µs a message), and each call has its own cost too.
+        """
         commands = self._commands
         assert commands is not None
+        batch: list[tuple[int, int, str, str, Message]] = []
         for recording in list(self.recordings):
             if recording.open_command is not None:
                 commands.send_bytes(_pickled(recording.open_command))
                 recording.open_command = None
             queue = recording.queue
             while queue:
-                batch = [queue.popleft() for _ in range(min(BATCH_MESSAGES, len(queue)))]
-                commands.send_bytes(_pickled(("messages", batch)))
+                batch.append(queue.popleft())
+                if len(batch) >= BATCH_MESSAGES:
+                    commands.send_bytes(_pickled(("messages", batch)))
+                    batch = []
+        if batch:
+            commands.send_bytes(_pickled(("messages", batch)))
 
     def _read_status(self, timeout_s: float = 0.0) -> bool:
         """Take the writer's reports; False once its pipe has ended."""
@@ -303,9 +320,11 @@ class Recorder:
         stats.summary, stats.written, stats.bytes = summary, summary["messages"], summary["bytes"]
         if op == "stopped":
             stats.state, stats.reason = "stopped", item[2]
-            log.error("recording of %s stopped: %s; %d messages in %s%s; the simulation goes "
-                      "on", recording.name, item[2], summary["messages"], recording.path,
-                      "" if summary["complete"] else " (its .mcap ends where writing failed)")
+            kept = f"{summary['messages']} messages in {recording.path}" if summary["complete"] \
+                else (f"{recording.path} keeps the {summary['messages']} messages written "
+                      "before (no metadata.yaml; its .mcap ends where writing failed)")
+            log.error("recording of %s stopped: %s; %s; the simulation goes on",
+                      recording.name, item[2], kept)
         elif op == "closed":
             stats.state = "closed"
 

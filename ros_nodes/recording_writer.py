@@ -123,9 +123,11 @@ class BagSet:
 
 
 def _reason(error: OSError) -> str:
-    """An OSError as one line (``No space left on device``, with the file)."""
-    where = f" ({error.filename})" if error.filename else ""
-    return f"{error.strerror or error}{where}"
+    """An OSError as a few words (``No space left on device``).
+
+    Without paths: /healthz shows it, and the log line names the bag.
+    """
+    return str(error.strerror or error)
 
 
 def serve(commands: Connection, status: Connection) -> None:
