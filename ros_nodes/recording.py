@@ -42,6 +42,7 @@ from typing import Any
 
 from ros_nodes.bag_writer import ROS_DISTRO
 from ros_nodes.recording_writer import serve
+from ros_nodes.robot_description import robot_json
 from ros_nodes.robot_interface import RECORDED_TOPICS
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.msgs.values import Message, stamp
@@ -63,6 +64,10 @@ CLOSE_TIMEOUT_S = 30.0
 
 DEFAULT_MAX_MB = 1000.0
 """Largest bag (MB on disk) by default (``--record-max-mb``): then it is closed, complete."""
+
+ROBOT_JSON_KEY = "robot_json"
+"""The bag's ``custom_data`` entry holding the robot's ``robot.json`` (what ``websim replay``
+serves the page)."""
 
 SINGLE_ROBOT_NAME = "robot"
 """The name of a single robot's bag (``websim serve`` without ``--class``)."""
@@ -222,7 +227,9 @@ class Recorder:
         sim = robot.sim
         data = {**self._custom_data, "robot": name, "world": sim.world.name, "mode": sim.mode,
                 "started_utc": started.isoformat(timespec="seconds"),
-                "message_definitions": f"ROS 2 {ROS_DISTRO}", **(custom_data or {})}
+                "message_definitions": f"ROS 2 {ROS_DISTRO}",
+                ROBOT_JSON_KEY: robot_json(sim.params, sim.lidar.params),
+                **(custom_data or {})}
         recording.open_command = ("open", recording.rid, str(path), data, self.max_bytes)
         self.recordings.append(recording)
         return recording

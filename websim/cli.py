@@ -26,6 +26,7 @@ from rosbridge.core.clock import (
     WallClock,
 )
 from websim import compare_command, map_command, sites
+from websim import replay as replay_command
 from websim import serve as serve_command
 
 DEFAULT_WORLD = str(WORLDS_DIR / "empty.yaml")
@@ -72,6 +73,14 @@ def build_parser() -> argparse.ArgumentParser:
                             "stamped with the wall clock)")
     serve_command.add_arguments(serve)
     serve.set_defaults(run=_run_serve)
+
+    replay = commands.add_parser(
+        "replay", help="play a recording (websim serve --record) back to the page",
+        description="Serve a recording's topics on the rosbridge WebSocket as they were "
+                    "recorded (or --speed times faster) and the robot's page, which shows "
+                    "them: view and plots, no ROS install needed.")
+    replay_command.add_arguments(replay)
+    replay.set_defaults(run=_run_replay)
 
     compare = commands.add_parser(
         "compare", help="run a command file in kinematic and dynamic mode and compare them",
@@ -238,6 +247,20 @@ def _run_serve(args: argparse.Namespace) -> int:
     return serve_command.run(args, sites.classroom_site(
         args, make_robot, (platform.robot, platform.lidar), token, limits, origins, clock,
         recorder), token)
+
+
+def _run_replay(args: argparse.Namespace) -> int:
+    recording = replay_command.Recording(args.recording)
+    serve_args = build_parser().parse_args(["serve"])  # every other option at its default
+    for name in ("host", "ws_port", "http_port", "log_level"):
+        setattr(serve_args, name, getattr(args, name))
+    token = strong_token()
+    site = replay_command.replay_site(recording, args.speed, args.loop, token,
+                                      serve_command.origins_from(serve_args), args.ws_port)
+    try:
+        return serve_command.run(serve_args, site, token)
+    finally:
+        recording.close()
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -311,8 +311,9 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     # what students and the instructor type: behind a proxy, its ports (--public-*-port)
     http_port = args.public_http_port or args.http_port
     ws_port = args.public_ws_port or args.ws_port
-    if robot is not None:
-        print(f"websim: world '{robot.sim.world.name}', {robot.sim.mode} mode", flush=True)
+    single = site.classroom is None
+    if single:
+        print(f"websim: {site.headline}", flush=True)
         print(f"  page:      http://{host}:{http_port}/", flush=True)
         print(f"  websocket: ws://{host}:{ws_port}/", flush=True)
         print(f"  admin:     http://{host}:{http_port}/admin?token={token}", flush=True)
@@ -347,7 +348,7 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
                   "(tokens guard only the WebSocket); discovery range "
                   f"{os.environ.get(DISCOVERY_RANGE, 'SUBNET')}", flush=True)
     if args.host in ("0.0.0.0", "::"):
-        if robot is not None or getattr(args, "open_drive", False):
+        if single or getattr(args, "open_drive", False):
             print("  listening on every network interface: anyone who can reach this machine "
                   "can drive the robots; only a token can change their parameters", flush=True)
         else:
@@ -356,7 +357,7 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
                   + ("the links file" if getattr(args, "links", None) else
                      "--links FILE writes every robot's; the dashboard's Token button shows "
                      "one") + ")", flush=True)
-        _print_lan_urls(args, robot is not None)
+        _print_lan_urls(args, single)
     if not (args.web_dir / "node_modules" / "roslib").is_dir():
         print(f"websim: warning: the page's libraries are not installed in {args.web_dir}; "
               "run: npm ci --prefix web-interface", flush=True)

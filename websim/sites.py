@@ -50,6 +50,9 @@ class Site:
         classroom: the class (None for a single robot).
         new_robot_json: ``robot.json`` of a class robot not created yet.
         recorder: the robots' recordings (``--record``), if any.
+        headline: what the banner says the server runs (a robot's world and mode; a
+            replay's recording), for one robot.
+        description: ``robot.json`` of a robot without a simulation here (a replay's).
     """
 
     front: WebSocketFront
@@ -59,6 +62,8 @@ class Site:
     classroom: Classroom | None = None
     new_robot_json: str | None = None
     recorder: Recorder | None = None
+    headline: str = ""
+    description: str | None = None
 
     def close(self) -> None:
         """Close the recordings, save a class's state and release its file (at shutdown)."""
@@ -92,8 +97,10 @@ class Site:
         proxy the page and the WebSocket of one robot may be served by different workers.
         """
         if robot is None:
-            if self.robot is not None:  # one robot: its description, and where its bridge is
+            if self.classroom is None:  # one robot: its description, and where its bridge is
                 if name == "robot.json":
+                    if self.robot is None:
+                        return self.description
                     return robot_json(self.robot.sim.params, self.robot.sim.lidar.params)
                 url = f"ws://{_url_name(hostname)}:{self.ws_port}/"
                 return json.dumps({"about": "this server's robot, filled by websim serve: "
@@ -134,7 +141,8 @@ def single_robot(robot: VirtualRobot, token: str, limits: ClientLimits,
         recorder: records the robot (``--record``); None: nothing is recorded.
     """
     server = SimServer(robot, token, limits=limits, origins=origins)
-    site = Site(server, robot=robot, ws_port=ws_port, recorder=recorder)
+    site = Site(server, robot=robot, ws_port=ws_port, recorder=recorder,
+                headline=f"world '{robot.sim.world.name}', {robot.sim.mode} mode")
     if recorder is not None:
         recording = recorder.record(SINGLE_ROBOT_NAME, robot)
         server.host.recording = recording

@@ -1,0 +1,307 @@
+"""``websim replay FILE.mcap|DIR``: a recording played back as its robot's topics, to the page.
+
+An instructor sees what a student's robot did without a ROS install: the recording's
+messages (``--record``'s bags, or any rosbag2 with the robot's topics) are published on the
+embedded bridge at the pace they were recorded, or ``--speed`` times faster, and the robot's
+page (``http://HOST:8080/``) draws them as it draws a live robot: the view (walls, pose,
+trail, scan) and the plots. Topics recorded as transient local (``/tf_static``, ``/world``)
+are latched, as on the robot, so a page opened midway gets them. The bridge owns every
+recorded topic: a page's teleop is refused (nothing drives a recording), and the robot's
+services are absent (the page falls back on ``robot.json``'s limits). ``robot.json`` is the
+recorded robot's (``custom_data`` of the bag), else the shipped robot's. The recording's
+time runs while a client is connected: it starts when the first page opens and waits while
+nobody watches. At the end the last picture stays; ``--loop`` starts over.
+
+Messages are read and decoded as they fall due (rosbags' reader and the bridge's typestore),
+never all at once: an hour's bag plays in the memory of a few messages.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rosbags.interfaces import QosDurability
+from rosbags.rosbag2 import Reader
+from rosbags.rosbag2.errors import ReaderError
+
+from physics import TICK_PERIOD_S, ConfigError
+from ros_nodes.recording import ROBOT_JSON_KEY
+from ros_nodes.robot_description import robot_json
+from ros_nodes.robot_interface import RESERVED_NAMESPACES
+from rosbridge.core.bridge import Bridge
+from rosbridge.core.clock import Clock, WallClock
+from rosbridge.core.faults import Faults
+from rosbridge.core.limits import OriginPolicy
+from rosbridge.msgs import cdr, definitions
+from rosbridge.msgs.checks import MessageError
+from rosbridge.msgs.values import Message
+from rosbridge.transport.front import Destination, WebSocketFront
+from rosbridge.transport.schedule import Schedule
+from websim.sites import Site
+
+log = logging.getLogger("websim.replay")
+
+@dataclass(frozen=True)
+class Played:
+    """One message of a recording: its log time (ns), topic, type, and canonical dict."""
+
+    log_time_ns: int
+    topic: str
+    type: str
+    msg: Message
+
+
+def plain(value: Any) -> Any:
+    """A deserialized message (rosbags' classes, numpy arrays) as dicts and lists."""
+    if hasattr(value, "__dataclass_fields__"):
+        return {name: plain(getattr(value, name)) for name in value.__dataclass_fields__
+                if not name.startswith("__") and not name.isupper()}  # constants are UPPER
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, list):
+        return [plain(item) for item in value]
+    return value
+
+
+class Recording:
+    """A rosbag2 to play: its topics, its time span, its messages in log-time order.
+
+    Args:
+        path: the bag's folder (``metadata.yaml`` and its files) or an ``.mcap`` file.
+
+    Raises:
+        ConfigError: no such bag, or one that cannot be read (the reason says why).
+    """
+
+    def __init__(self, path: Path) -> None:
+        if path.suffix == ".mcap" and (path.parent / "metadata.yaml").is_file():
+            path = path.parent  # the folder's metadata knows its files
+        if not path.exists():
+            raise ConfigError(f"{path}: no such recording (a --record bag's folder or its "
+                              ".mcap file)")
+        self.path = path
+        try:
+            self._reader = Reader(path)
+            self._reader.open()
+        except (ReaderError, OSError) as error:
+            raise ConfigError(f"{path}: cannot read this recording: {error}") from None
+        store = cdr.typestore()
+        unknown = sorted({c.msgtype for c in self._reader.connections
+                          if c.msgtype not in store.fielddefs})
+        if unknown:
+            log.warning("%s: skipping topics of types websim does not know: %s", path,
+                        ", ".join(unknown))
+        self.connections = [c for c in self._reader.connections
+                            if c.msgtype in store.fielddefs]
+        self.topics = {c.topic: c.msgtype for c in self.connections}
+        """Each topic played and its type."""
+        self.latched = frozenset(
+            c.topic for c in self.connections
+            if any(qos.durability == QosDurability.TRANSIENT_LOCAL
+                   for qos in getattr(c.ext, "offered_qos_profiles", ())))
+        """Topics recorded as transient local: latched on the bridge."""
+        self.start_ns = self._reader.start_time
+        self.duration_s = max(0, self._reader.end_time - self._reader.start_time) / 1e9
+        self.message_count = self._reader.message_count
+        metadata = getattr(self._reader.storage, "metadata", None)
+        custom: dict[str, str] = getattr(metadata, "custom", None) or {}
+        self.robot_json: str = custom.get(ROBOT_JSON_KEY) or robot_json()
+        """The recorded robot's ``robot.json`` (the shipped robot's if the bag lacks it)."""
+        self.name = custom.get("robot") or path.stem
+
+    def messages(self) -> Iterator[Played]:
+        """Every message in log-time order, decoded as it is reached.
+
+        One that does not decode (a corrupt record) is skipped with a warning.
+        """
+        store = cdr.typestore()
+        for connection, log_time_ns, raw in self._reader.messages(self.connections):
+            try:
+                msg = definitions.canonical(
+                    connection.msgtype,
+                    plain(store.deserialize_cdr(raw, connection.msgtype)))
+            except (MessageError, ValueError, KeyError, IndexError) as error:
+                log.warning("%s: a %s message at %d ns does not decode: %s", self.path,
+                            connection.topic, log_time_ns, error)
+                continue
+            yield Played(log_time_ns, connection.topic, connection.msgtype, msg)
+
+    def close(self) -> None:
+        """Close the bag's files."""
+        self._reader.close()
+
+
+class ReplayHost:
+    """A recording's bridge and the ticks that publish what falls due (a ``Destination``).
+
+    Args:
+        recording: the recording to play.
+        speed: times real time (1: as recorded).
+        loop: start over at the end (else the last picture stays).
+        clock: the clock of the pace, the bridge's throttles and timeouts.
+    """
+
+    def __init__(self, recording: Recording, speed: float = 1.0, loop: bool = False,
+                 clock: Clock | None = None) -> None:
+        if not (math.isfinite(speed) and speed > 0):
+            raise ConfigError(f"--speed must be a number greater than 0, got {speed}")
+        self.recording = recording
+        self.speed = speed
+        self.loop = loop
+        self.clock: Clock = clock or WallClock()
+        self.faults = Faults()
+        self.bridge = Bridge(clock=self.clock, faults=self.faults,
+                             reserved_namespaces=RESERVED_NAMESPACES)
+        for topic, type_name in recording.topics.items():
+            self.bridge.topics.own(topic, type_name)  # a recording is not driven
+        self.schedule = Schedule(TICK_PERIOD_S, clock=self.clock)
+        self.played = 0
+        """Messages published so far (this pass)."""
+        self.passes = 0
+        """Times the recording was played to its end."""
+        self._messages: Iterator[Played] = iter(())
+        self._next: Played | None = None
+        self._position_s = 0.0
+        self._last_tick_s = self.clock.monotonic_s()
+        self._at_end = False
+        self._restart()
+
+    def _restart(self) -> None:
+        self._messages = self.recording.messages()
+        self._next = next(self._messages, None)
+        self._position_s = 0.0
+        self._at_end = False
+        self.played = 0
+
+    @property
+    def position_s(self) -> float:
+        """Where the playback is in the recording (s from its start)."""
+        return min(self._position_s, self.recording.duration_s)
+
+    @property
+    def finished(self) -> bool:
+        """Whether every message was published (and no loop starts over)."""
+        return self._next is None
+
+    async def run_ticks(self) -> None:
+        """Play, one tick every 50 ms, forever."""
+        await self.schedule.run(self.tick)
+
+    def tick(self, lateness_s: float = 0.0) -> None:
+        """Publish every message whose time has come; never raises.
+
+        The recording's time runs while a client is connected (``speed`` times the clock's):
+        it starts with the first page or client, and waits while nobody watches.
+        """
+        now_s = self.clock.monotonic_s()
+        elapsed_s, self._last_tick_s = now_s - self._last_tick_s, now_s
+        if not self.bridge.sessions:
+            return
+        self._position_s += elapsed_s * self.speed
+        due_ns = self.recording.start_ns + self._position_s * 1e9
+        batch: list[tuple[str, Message]] = []
+        writers = self.schedule.writers
+        try:
+            while self._next is not None and self._next.log_time_ns <= due_ns:
+                played = self._next
+                if played.topic in self.recording.latched:
+                    writers.write(self.bridge.publish(played.topic, played.msg, latch=True))
+                else:
+                    batch.append((played.topic, played.msg))
+                self.played += 1
+                self._next = next(self._messages, None)
+            for flush in self.bridge.publish_many(batch, now_s - lateness_s):
+                writers.write(flush)
+            self.bridge.services.expire()
+            writers.write(self.bridge.take_flush())
+        except Exception as error:  # the replay's boundary: record, go on
+            self.faults.record("replaying the recording", error)
+        if self._next is None and not self._at_end:
+            self._at_end = True
+            self.passes += 1
+            log.info("replay of %s reached its end (%d messages)", self.recording.path,
+                     self.played)
+            if self.loop:
+                self._restart()
+
+    def health(self) -> dict[str, Any]:
+        """The replay's /healthz."""
+        sessions = self.bridge.sessions
+        report: dict[str, Any] = {
+            "status": "degraded" if self.faults.degraded else "ok",
+            "replay": str(self.recording.name),
+            "position_s": round(self.position_s, 3),
+            "duration_s": round(self.recording.duration_s, 3),
+            "speed": self.speed,
+            "finished": self.finished,
+            "passes": self.passes,
+            "ticks": self.schedule.ticks_due(),
+            "clients": len(sessions),
+        }
+        report.update(self.faults.report())
+        return report
+
+
+class ReplayServer(WebSocketFront):
+    """The WebSocket front of a replay: the recording's robot at every path.
+
+    Args:
+        host: the replay.
+        admin_token: the secret of admin rights (nothing of a replay needs them).
+        origins: which web pages may connect.
+    """
+
+    def __init__(self, host: ReplayHost, admin_token: str,
+                 origins: OriginPolicy | None = None) -> None:
+        super().__init__(admin_token, origins=origins, clock=host.clock)
+        self.host = host
+
+    def route(self, path: str) -> tuple[Destination, str | None] | str:
+        """The one recording, whatever the path."""
+        return self.host, None
+
+    async def run_ticks(self) -> None:
+        """Play the recording."""
+        await self.host.run_ticks()
+
+    def health(self, full: bool = True) -> dict[str, Any]:
+        """The replay's position, clients and faults."""
+        return {**self.host.health(), "uptime_s": self._uptime_s()}
+
+
+def replay_site(recording: Recording, speed: float, loop: bool, token: str,
+                origins: OriginPolicy, ws_port: int) -> Site:
+    """What ``websim serve``'s loop runs for a replay: its front, page documents, banner."""
+    host = ReplayHost(recording, speed, loop)
+    site = Site(ReplayServer(host, token, origins), ws_port=ws_port,
+                headline=f"replaying {recording.path} ({recording.duration_s:.1f} s, "
+                         f"{recording.message_count} messages) at {speed:g}x"
+                         + (", in a loop" if loop else ""),
+                description=recording.robot_json)
+    site.banner.append(f"topics:    {', '.join(sorted(recording.topics))} (the page's "
+                       "teleop and services are refused: a recording is not driven)")
+    return site
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``websim replay``."""
+    parser.add_argument("recording", type=Path, metavar="FILE.mcap|DIR",
+                        help="a bag of websim serve --record (its folder or its .mcap file)")
+    parser.add_argument("--speed", type=float, default=1.0, metavar="X",
+                        help="play X times faster than recorded (default 1)")
+    parser.add_argument("--loop", action="store_true", help="start over at the end")
+    parser.add_argument("--host", default="127.0.0.1",
+                        help="address to bind (default 127.0.0.1)")
+    parser.add_argument("--ws-port", type=int, default=9090,
+                        help="rosbridge WebSocket port (default 9090)")
+    parser.add_argument("--http-port", type=int, default=8080,
+                        help="web interface port (default 8080)")
+    parser.add_argument("--log-level", default="warning",
+                        choices=["debug", "info", "warning", "error"],
+                        help="logging level (default warning)")
