@@ -244,6 +244,16 @@ class Recorder:
             candidate = directory / f"{base}-{number}"
         return candidate
 
+    def caught_up(self) -> bool:
+        """Whether every recording's queue is at most half full.
+
+        A ``Schedule`` pacer: above real time the ticks wait for the writer rather than drop
+        messages (at most ``CLIENT_WAIT_S`` a tick).
+        """
+        limit = self._max_queued // 2
+        return all(len(recording.queue) <= limit for recording in self.recordings
+                   if recording.accepting)
+
     @property
     def running(self) -> bool:
         """Whether the writer process runs (``start`` was called and ``close`` was not)."""

@@ -126,8 +126,7 @@ def test_a_bag_holds_what_a_roslibpy_client_received_and_sent(
     reads = both_readers(bag)
     info = check_bag_info(bag, reads)
     assert info["custom_data"]["world"] == "maze" and info["custom_data"]["robot"] == "robot"
-    assert set(info["topics"]) == {"/cmd_vel", "/odom", "/scan", "/tf", "/tf_static",
-                                   "/ground_truth", "/world"}
+    assert set(info["topics"]) == {spec.name for spec in RECORDED_TOPICS}
     by_stamp = {(read.topic, header_ns(read, read.topic)): read for read in reads
                 if read.topic in WATCHED}
     for topic in ("/odom", "/scan", "/tf", "/ground_truth"):
@@ -249,3 +248,22 @@ def test_a_server_killed_with_sigkill_still_leaves_its_bag_complete(tmp_path: Pa
     reads = both_readers(bag)
     check_bag_info(bag, reads)
     assert len(reads) > 20
+
+
+def test_above_real_time_the_ticks_wait_for_the_writer_and_nothing_is_lost(
+        tmp_path: Path) -> None:
+    """At --speed max a recording is complete: every tick's /clock and /odom, in order."""
+    bags = tmp_path / "bags"
+    server = start_server(["--record", str(bags), "--speed", "max"])
+    wait_for(lambda: server.health()["recording"]["messages_written"] > 20_000,
+             timeout_s=60, what="20,000 messages written")
+    assert server.health()["recording"]["messages_lost"] == 0
+    assert server.stop() == 0
+    assert "lost" not in "".join(server.output)
+    reads = read_with_rosbags(only_bag(bags, "robot"))
+    clocks = [read.message["clock"] for read in reads if read.topic == "/clock"]
+    ticks_ns = [clock["sec"] * 10**9 + clock["nanosec"] for clock in clocks]
+    steps = {b - a for a, b in zip(ticks_ns, ticks_ns[1:], strict=False)}
+    assert steps == {50_000_000}  # no tick missing
+    odoms = [read for read in reads if read.topic == "/odom"]
+    assert len(odoms) == len(clocks) > 3000

@@ -303,6 +303,7 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
         loop.add_signal_handler(signum, stop.set)
     if site.recorder is not None:
         site.recorder.start()
+        site.schedule().pacers.append(site.recorder.caught_up)  # lossless above real time
     tasks = [asyncio.create_task(server.run_ticks())]
     if ros is not None:
         tasks.append(asyncio.create_task(_poll_graph(ros)))

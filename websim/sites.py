@@ -35,6 +35,7 @@ from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.clock import Clock
 from rosbridge.core.limits import ClientLimits, LatchedBytes, OriginPolicy
 from rosbridge.transport.front import WebSocketFront
+from rosbridge.transport.schedule import Schedule
 
 
 @dataclass
@@ -72,6 +73,14 @@ class Site:
         if self.classroom is not None and self.classroom.state is not None:
             self.classroom.save()
             self.classroom.state.close()
+
+    def schedule(self) -> Schedule:
+        """The tick schedule the robots follow (a class's, or the single robot's host's)."""
+        if self.classroom is not None:
+            return self.classroom.schedule
+        destination = self.front.route("/")
+        assert not isinstance(destination, str)
+        return destination[0].schedule
 
     def class_hosts(self) -> list[tuple[str, RobotHost]]:
         """The robots of a class, by name (none for a single robot)."""

@@ -13,7 +13,8 @@ nothing and no tick is ever late (nothing is shed); a host or a client that cann
 pace slows the run, never loses its messages. A client that has not taken its frames within
 ``CLIENT_WAIT_S`` is released: the ticks go on without waiting for it (it gets the newest of
 each topic, as a slow client does at real time) until it has caught up, and the connection's
-stall watchdog closes it if its socket keeps taking nothing.
+stall watchdog closes it if its socket keeps taking nothing. Whatever else must keep up
+with the ticks (a recording's writer) is waited for the same way (``pacers``).
 """
 
 from __future__ import annotations
@@ -74,6 +75,9 @@ class Schedule:
         resyncs: times the schedule was restarted after falling far behind.
         clients_released: times a client was released (not waited for) above real time.
         tick_listeners: called after every tick (a class's ``/clock`` on the ROS graph).
+        pacers: above real time, waited for as clients are: each says whether it has taken
+            what the ticks gave it (a recording's writer, ``ros_nodes.recording``); one that
+            has not within ``CLIENT_WAIT_S`` is not waited for at that tick.
         writers: the connections of the loop, where flushes are written.
 
     Raises:
@@ -95,6 +99,7 @@ class Schedule:
         self.resyncs = 0
         self.clients_released = 0
         self.tick_listeners: list[Callable[[], None]] = []
+        self.pacers: list[Callable[[], bool]] = []
         self._ticks = 0
         self._next_deadline_s: float | None = None
 
@@ -133,23 +138,29 @@ class Schedule:
                     log.exception("a tick listener failed")
 
     async def _wait_for_clients(self) -> None:
-        """Wait until every client has taken its frames; release those that take too long."""
+        """Wait until every client and pacer has taken its frames; release slow clients."""
         writers, clock = self.writers, self.clock
         waiting = writers.waiting()
-        if not waiting:
+        if not waiting and self._paced():
             return
         started_s = clock.monotonic_s()
-        while waiting:
+        while waiting or not self._paced():
             left_s = CLIENT_WAIT_S - (clock.monotonic_s() - started_s)
             if left_s <= 0:
-                writers.release(waiting)
-                self.clients_released += len(waiting)
-                log.warning("%d client(s) did not take one tick's frames within %g s: the "
-                            "ticks go on without waiting for them (they get the newest of "
-                            "each topic until they catch up)", len(waiting), CLIENT_WAIT_S)
+                if waiting:
+                    writers.release(waiting)
+                    self.clients_released += len(waiting)
+                    log.warning("%d client(s) did not take one tick's frames within %g s: "
+                                "the ticks go on without waiting for them (they get the "
+                                "newest of each topic until they catch up)", len(waiting),
+                                CLIENT_WAIT_S)
                 return
             await writers.progress(min(left_s, CLIENT_POLL_S))
             waiting = writers.waiting()
+
+    def _paced(self) -> bool:
+        """Whether every pacer has taken what it was given."""
+        return all(pacer() for pacer in self.pacers)
 
     def ticks_due(self) -> int:
         """Ticks the schedule should have run by now (above real time: those it ran)."""
