@@ -115,18 +115,16 @@ async def window(server: Server, n_robots: int, driven: bool, seconds: float,
     }
 
 
-def run(n_robots: int, scenario: str, record: bool, seconds: float, warmup_s: float,
-        log_dir: Path) -> dict[str, Any]:
-    """One server, one scenario, with or without ``--record``."""
-    bags = log_dir / f"bags-{scenario}-{n_robots}-{time.monotonic_ns()}"
-    extra = ["--class", str(n_robots), "--open-drive", "--state",
-             str(log_dir / f"state-{scenario}-{record}.sqlite"), "--fresh"]
-    if record:
-        extra += ["--record", str(bags)]
-    with running_server(log_dir, extra) as server:
-        row = asyncio.run(window(server, n_robots, scenario == "driven", seconds, warmup_s))
-    row.update(scenario=scenario, record=record, robots=n_robots)
-    if record:
+def server_args(n_robots: int, record_dir: Path | None, state: Path) -> list[str]:
+    """The class's options (with ``--record record_dir`` unless None)."""
+    extra = ["--class", str(n_robots), "--open-drive", "--state", str(state), "--fresh"]
+    return extra + (["--record", str(record_dir)] if record_dir is not None else [])
+
+
+def finish(row: dict[str, Any], scenario: str, n_robots: int, bags: Path | None) -> None:
+    """Label a window's row; with a recording, its bags' sizes, messages written and lost."""
+    row.update(scenario=scenario, record=bags is not None, robots=n_robots)
+    if bags is not None:
         per_minute = []
         for bag in bags.iterdir():
             size = sum(path.stat().st_size for path in bag.iterdir())
@@ -138,7 +136,40 @@ def run(n_robots: int, scenario: str, record: bool, seconds: float, warmup_s: fl
         row["messages_written"] = sum(r["messages_written"] for r in row["recordings"])
         row["messages_lost"] = sum(r["messages_lost"] for r in row["recordings"])
     del row["recordings"]
+
+
+def run(n_robots: int, scenario: str, record: bool, seconds: float, warmup_s: float,
+        log_dir: Path) -> dict[str, Any]:
+    """One server, one scenario, with or without ``--record``."""
+    bags = log_dir / f"bags-{scenario}-{n_robots}-{time.monotonic_ns()}" if record else None
+    state = log_dir / f"state-{scenario}-{record}-{time.monotonic_ns()}.sqlite"
+    with running_server(log_dir, server_args(n_robots, bags, state)) as server:
+        row = asyncio.run(window(server, n_robots, scenario == "driven", seconds, warmup_s))
+    finish(row, scenario, n_robots, bags)
     return row
+
+
+def run_paired(n_robots: int, scenario: str, seconds: float, warmup_s: float,
+               log_dir: Path) -> list[dict[str, Any]]:
+    """Both servers at once, without and with ``--record``: the same host load for both.
+
+    Each row's others' CPU then includes the other server and its clients.
+    """
+    stamp = time.monotonic_ns()
+    bags = log_dir / f"bags-{scenario}-{n_robots}-{stamp}"
+    with running_server(log_dir, server_args(n_robots, None, log_dir / f"a-{stamp}.sqlite")) \
+            as plain, running_server(log_dir, server_args(
+                n_robots, bags, log_dir / f"b-{stamp}.sqlite")) as recorded:
+
+        async def both() -> list[dict[str, Any]]:
+            return list(await asyncio.gather(
+                window(plain, n_robots, scenario == "driven", seconds, warmup_s),
+                window(recorded, n_robots, scenario == "driven", seconds, warmup_s)))
+
+        rows = asyncio.run(both())
+    finish(rows[0], scenario, n_robots, None)
+    finish(rows[1], scenario, n_robots, bags)
+    return rows
 
 
 def tick_cost(ticks: int = 4000) -> dict[str, float]:
@@ -175,6 +206,7 @@ def tick_cost(ticks: int = 4000) -> dict[str, float]:
         recorder.close()
     results["recording_per_tick_us"] = results["tick_recorded_us"] - \
         results["tick_null_tap_us"]
+    results["messages_per_tick"] = recording.stats.queued / recorded.sim.tick
     return results
 
 
@@ -203,6 +235,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--repeat", type=int, default=1,
                         help="runs of each pair, alternating without and with --record")
     parser.add_argument("--json", action="store_true", help="also print the rows as JSON")
+    parser.add_argument("--paired", action="store_true",
+                        help="run the two servers (without, with --record) at the same time, "
+                             "under the same host load")
     parser.add_argument("--tick-cost-only", action="store_true",
                         help="only the in-process tick cost (no server)")
     args = parser.parse_args(argv)
@@ -210,17 +245,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"one robot's tick, every message built (maze; CPU time, best of 5): "
           f"{cost['tick_null_tap_us']:.1f} µs with a tap listener that does nothing, "
           f"{cost['tick_recorded_us']:.1f} µs recorded: the recording costs the tick "
-          f"{cost['recording_per_tick_us']:.1f} µs (3.5 messages per tick)", flush=True)
+          f"{cost['recording_per_tick_us']:.1f} µs ({cost['messages_per_tick']:.1f} messages "
+          "per tick)", flush=True)
     if args.tick_cost_only:
         return 0
     rows = []
     with tempfile.TemporaryDirectory(prefix="websim-bench-recording-") as folder:
         for scenario in args.scenarios:
-            for record in (False, True) * args.repeat:
-                row = run(args.robots, scenario, record, args.seconds, args.warmup,
-                          Path(folder))
-                rows.append(row)
-                print(table([row]).splitlines()[1], flush=True)
+            for _ in range(args.repeat):
+                if args.paired:
+                    pair = run_paired(args.robots, scenario, args.seconds, args.warmup,
+                                      Path(folder))
+                else:
+                    pair = [run(args.robots, scenario, record, args.seconds, args.warmup,
+                                Path(folder)) for record in (False, True)]
+                rows.extend(pair)
+                for row in pair:
+                    print(table([row]).splitlines()[1], flush=True)
     print(table(rows))
     if args.json:
         print(json.dumps(rows, indent=1))

@@ -152,12 +152,21 @@ def test_the_replay_paces_messages_by_their_log_time_times_the_speed(bag: Path) 
     assert host.position_s == pytest.approx(host.recording.duration_s)
 
 
-def test_a_missing_recording_is_refused_with_the_reason(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("args", "reason"), [
+    (["{missing}"], "no such recording"),
+    (["{not_a_bag}"], "cannot read this recording"),
+    (["{bag}", "--speed", "0"], "--speed must be a number greater than 0"),
+])
+def test_a_recording_that_cannot_be_played_is_refused_with_the_reason(
+        tmp_path: Path, bag: Path, args: list[str], reason: str) -> None:
+    not_a_bag = tmp_path / "notes.mcap"
+    not_a_bag.write_text("not an MCAP file")
+    paths = {"missing": tmp_path / "nothing", "not_a_bag": not_a_bag, "bag": bag}
     result = subprocess.run([sys.executable, "-m", "websim.cli", "replay",
-                             str(tmp_path / "nothing")], capture_output=True, text=True,
-                            timeout=60, check=False)
-    assert result.returncode == 2
-    assert "no such recording" in result.stderr
+                             *(arg.format(**paths) for arg in args)], capture_output=True,
+                            text=True, timeout=60, check=False)
+    assert result.returncode == 2, result.stderr
+    assert reason in result.stderr
 
 
 @needs_browser
