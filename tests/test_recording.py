@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import shutil
 import subprocess
 import sys
 from collections import Counter
@@ -380,3 +381,28 @@ def test_float32_fields_are_recorded_as_the_message_holds_them(recorder: Recorde
     scan = next(msg for _, topic, _, msg in heard if topic == "/scan")
     read: Read = next(r for r in read_with_mcap(recording.path) if r.topic == "/scan")
     assert read.message["ranges"] == np.asarray(scan["ranges"], dtype=np.float32).tolist()
+
+
+def test_rosbag2s_own_reader_and_ros2_bag_info_read_it(recorder: Recorder) -> None:
+    """rosbag2_py and the ros2 CLI come with a ROS 2 install (Jazzy or later), not from PyPI."""
+    rosbag2_py = pytest.importorskip(
+        "rosbag2_py", reason="rosbag2_py is not on PyPI: it needs a ROS 2 install (Jazzy+)")
+    rig = robot_rig("empty")
+    recording = recorder.record("robot", rig.robot)
+    recorder.start()
+    drive(rig, 20)
+    recorder.close()
+    reader = rosbag2_py.SequentialReader()
+    reader.open(rosbag2_py.StorageOptions(uri=str(recording.path), storage_id="mcap"),
+                rosbag2_py.ConverterOptions("", ""))
+    topics = {topic.name: topic.type for topic in reader.get_all_topics_and_types()}
+    assert topics == {read.topic: read.type for read in read_with_rosbags(recording.path)}
+    count = 0
+    while reader.has_next():
+        reader.read_next()
+        count += 1
+    assert count == recording.stats.written
+    if shutil.which("ros2"):
+        info = subprocess.run(["ros2", "bag", "info", str(recording.path)],
+                              capture_output=True, text=True, timeout=60, check=True).stdout
+        assert f"Messages:          {count}" in info

@@ -9,6 +9,7 @@ bag properly.
 
 from __future__ import annotations
 
+import itertools
 import math
 import signal
 import subprocess
@@ -263,7 +264,7 @@ def test_above_real_time_the_ticks_wait_for_the_writer_and_nothing_is_lost(
     reads = read_with_rosbags(only_bag(bags, "robot"))
     clocks = [read.message["clock"] for read in reads if read.topic == "/clock"]
     ticks_ns = [clock["sec"] * 10**9 + clock["nanosec"] for clock in clocks]
-    steps = {b - a for a, b in zip(ticks_ns, ticks_ns[1:], strict=False)}
+    steps = {b - a for a, b in itertools.pairwise(ticks_ns)}
     assert steps == {50_000_000}  # no tick missing
     odoms = [read for read in reads if read.topic == "/odom"]
     assert len(odoms) == len(clocks) > 3000
