@@ -29,6 +29,7 @@ the UTC time it started), as rosbag2 lays a bag out: ``metadata.yaml`` and one `
 from __future__ import annotations
 
 import io
+import json
 import logging
 import multiprocessing
 import pickle
@@ -228,7 +229,8 @@ class Recorder:
         data = {**self._custom_data, "robot": name, "world": sim.world.name, "mode": sim.mode,
                 "started_utc": started.isoformat(timespec="seconds"),
                 "message_definitions": f"ROS 2 {ROS_DISTRO}",
-                ROBOT_JSON_KEY: robot_json(sim.params, sim.lidar.params),
+                ROBOT_JSON_KEY: json.dumps(json.loads(robot_json(sim.params, sim.lidar.params)),
+                                           separators=(",", ":"), sort_keys=True),
                 **(custom_data or {})}
         recording.open_command = ("open", recording.rid, str(path), data, self.max_bytes)
         self.recordings.append(recording)
