@@ -28,6 +28,8 @@ the UTC time it started), as rosbag2 lays a bag out: ``metadata.yaml`` and one `
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import io
 import json
 import logging
@@ -277,6 +279,20 @@ class Recorder:
         self._feeder = threading.Thread(target=self._feed, name="websim-recording-feeder",
                                         daemon=True)
         self._feeder.start()
+        # Before multiprocessing joins its children at exit (atexit runs the later first): a
+        # process that ends without close() (an exception, a failed test) ends the writer's
+        # pipe, so the writer closes the bags and exits instead of waiting for commands.
+        atexit.register(self._abandon)
+
+    def _abandon(self) -> None:
+        """At exit without ``close``: stop feeding and end the pipe (the writer closes up)."""
+        if self._closed or self._commands is None:
+            return
+        self._stop.set()
+        if self._feeder is not None:
+            self._feeder.join(timeout=2.0)
+        with contextlib.suppress(OSError):
+            self._commands.close()
 
     def _feed(self) -> None:
         """The feeder thread: hand the queues to the writer until ``close``."""

@@ -406,3 +406,34 @@ def test_rosbag2s_own_reader_and_ros2_bag_info_read_it(recorder: Recorder) -> No
         info = subprocess.run(["ros2", "bag", "info", str(recording.path)],
                               capture_output=True, text=True, timeout=60, check=True).stdout
         assert f"Messages:          {count}" in info
+
+
+EXITS_WITHOUT_CLOSE = """
+import sys
+sys.path.insert(0, sys.argv[2])
+from robot_rig import robot_rig
+from ros_nodes.recording import Recorder
+rig = robot_rig("maze")
+from pathlib import Path
+recorder = Recorder(Path(sys.argv[1]))
+recorder.record("alice", rig.robot)
+recorder.start()
+for _ in range(20):
+    rig.tick()
+raise SystemExit("a failure before close()")
+"""
+
+
+def test_a_process_that_ends_without_close_still_exits_and_closes_its_bags(
+        tmp_path: Path) -> None:
+    """An exception before ``close`` (a server's crash, a failed test) must not leave the
+    interpreter waiting at exit for a writer that waits for commands: the pipe ends, the
+    writer closes the bag, and the process exits."""
+    tests_dir = Path(__file__).resolve().parent
+    ended = subprocess.run([sys.executable, "-c", EXITS_WITHOUT_CLOSE, str(tmp_path),
+                            str(tests_dir)], capture_output=True, text=True, timeout=60,
+                           check=False)
+    assert ended.returncode == 1 and "a failure before close()" in ended.stderr
+    (bag,) = [path for path in tmp_path.iterdir() if path.is_dir()]
+    assert (bag / "metadata.yaml").is_file(), list(bag.iterdir())
+    assert len(read_with_rosbags(bag)) >= 20
