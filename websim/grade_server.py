@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import json
 import math
 import os
@@ -43,7 +44,7 @@ from ros_nodes.recording import Recorder
 from ros_nodes.robot_interface import RESET_SERVICE
 from ros_nodes.tap import IN, OUT
 from ros_nodes.virtual_robot_core import VirtualRobot
-from rosbridge.core.clock import SPEED_MAX, SimClock
+from rosbridge.core.clock import MAX_SPEED, SPEED_MAX, SimClock
 from rosbridge.core.limits import ClientLimits, OriginPolicy
 from rosbridge.msgs.values import Message
 from websim import serve as serve_command
@@ -283,7 +284,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     token = strong_token()
     serve_args = serve_command_arguments(args)
     recorder = Recorder(args.out / RECORDING_DIR)
-    site = sites.single_robot(robot, token, ClientLimits(), OriginPolicy.default(
+    site = sites.single_robot(robot, token, grade_limits(args.mode), OriginPolicy.default(
         args.host, args.http_port, []), args.ws_port, recorder=recorder)
     host = site.front.host  # type: ignore[attr-defined]
     host.bridge.services.add(RESET_SERVICE, "std_srvs/srv/Empty", _refuse_reset)
@@ -297,6 +298,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if lock_step.finished is None:
             lock_step.write()
+
+
+def grade_limits(mode: str) -> ClientLimits:
+    """The clients' bounds: ``websim serve``'s, but in deterministic mode its rates.
+
+    The rate budgets are per second of wall time, and a deterministic run goes as fast as
+    the controller answers: one /cmd_vel per 0.05 s tick at 10x real time is 200 messages a
+    second, ``DEFAULT_MAX_RATE``. There the lock step is the bound (the controller sends its
+    command and the next tick waits for it), so the rates are raised by ``MAX_SPEED``.
+    """
+    limits = ClientLimits()
+    if mode != "deterministic":
+        return limits
+    return dataclasses.replace(
+        limits, max_rate=limits.max_rate * MAX_SPEED,
+        address_max_rate=limits.address_max_rate * MAX_SPEED,
+        handling_share=1.0, address_handling_share=1.0, robot_handling_share=1.0)
 
 
 def _refuse_reset(args: Any, session: Any) -> Any:
