@@ -62,7 +62,8 @@ def trajectory_from_bag(bag: Path, scenario: Scenario, epoch_s: float) -> list[S
     robot = scenario.robot
     with Reader(bag) as reader:
         wanted = [c for c in reader.connections if c.topic in (GROUND_TRUTH, CMD_VEL)]
-        for connection, time_ns, raw in reader.messages(connections=wanted):
+        # (no connection given means every one: a run that never ticked has neither topic)
+        for connection, time_ns, raw in reader.messages(connections=wanted) if wanted else ():
             msg: Any = store.deserialize_cdr(raw, connection.msgtype)
             t_s = time_ns / 1e9 - epoch_s
             if connection.topic == GROUND_TRUTH:

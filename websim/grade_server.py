@@ -31,7 +31,7 @@ import math
 import os
 import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -112,7 +112,8 @@ class RunEnd:
 class LockStep:
     """The run's pace and end: the schedule's gate and tick listener, the robot's tap.
 
-    Before the first tick it waits for the controller to subscribe to the trigger topic. Each
+    Before the first tick it waits for the controller to subscribe to the trigger topic (in
+    wall-clock mode: to connect), at most ``startup_timeout_s``. Each
     time the robot publishes that topic (every ``every``-th time, for ``rate``) the controller
     is due; in deterministic mode the next tick waits until a /cmd_vel arrives after it, at
     most ``STEP_TIMEOUT_S``. Every tick it applies the scenario's timed changes and checks
@@ -120,9 +121,12 @@ class LockStep:
     """
 
     def __init__(self, scenario: Scenario, robot: VirtualRobot, clock: SimClock,
-                 subscribed: Any, *, mode: str, step_on: str, out: Path) -> None:
+                 subscribed: Callable[[], Collection[str]], connected: Callable[[], bool], *,
+                 mode: str, step_on: str, out: Path,
+                 startup_timeout_s: float = STARTUP_TIMEOUT_S) -> None:
         self.scenario, self.robot, self.clock = scenario, robot, clock
-        self.subscribed = subscribed
+        self.subscribed, self.connected = subscribed, connected
+        self.startup_timeout_s = startup_timeout_s
         self.deterministic = mode == "deterministic"
         self.mode, self.step_on = mode, step_on
         self.trigger = STEP_ON[step_on]
@@ -190,12 +194,13 @@ class LockStep:
 
     async def _wait_for_start(self) -> None:
         loop = asyncio.get_running_loop()
-        deadline = loop.time() + STARTUP_TIMEOUT_S
-        wanted = "/odom" if self.trigger == "/clock" and not self.deterministic else self.trigger
-        while wanted not in self.subscribed():
+        deadline = loop.time() + self.startup_timeout_s
+        wanted = f"subscribe to {self.trigger}" if self.deterministic else "connect"
+        while not (self.trigger in self.subscribed() if self.deterministic
+                   else self.connected()):
             if loop.time() >= deadline:
-                self.finish("no_start", f"the controller did not subscribe to {wanted} within "
-                                        f"{STARTUP_TIMEOUT_S:g} s: the run never started")
+                self.finish("no_start", f"the controller did not {wanted} within "
+                                        f"{self.startup_timeout_s:g} s: the run never started")
                 await asyncio.Event().wait()
             await asyncio.sleep(0.01)
         self.started = True
@@ -250,6 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", type=Path, required=True, help="run.json and recording/")
     parser.add_argument("--mode", choices=MODES, default="deterministic")
     parser.add_argument("--step-on", choices=tuple(STEP_ON), default="odom")
+    parser.add_argument("--startup-timeout", type=float, default=STARTUP_TIMEOUT_S)
     parser.add_argument("--host", default="127.0.0.1")
     parser.add_argument("--ws-port", type=int, default=9090)
     parser.add_argument("--http-port", type=int, default=8080)
@@ -289,7 +295,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     host = site.front.host  # type: ignore[attr-defined]
     host.bridge.services.add(RESET_SERVICE, "std_srvs/srv/Empty", _refuse_reset)
     lock_step = LockStep(scenario, robot, clock, host.bridge.topics.subscribed_topics,
-                         mode=args.mode, step_on=args.step_on, out=args.out)
+                         lambda: bool(host.bridge.sessions), mode=args.mode,
+                         step_on=args.step_on, out=args.out,
+                         startup_timeout_s=args.startup_timeout)
     schedule = site.schedule()
     schedule.gates.append(lock_step.gate)
     schedule.tick_listeners.append(lock_step.after_tick)
