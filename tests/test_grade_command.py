@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from websim import cli
-from websim.grade_command import WALL_CLOCK_SCORE_TOLERANCE
+from websim.grade_run import WALL_CLOCK_SCORE_TOLERANCE
 
 SOLUTIONS = Path(__file__).resolve().parent.parent / "examples" / "solutions"
 SANDBOXED = shutil.which("bwrap") is not None and os.geteuid() == 0
