@@ -59,7 +59,7 @@ def test_a_class_is_graded_into_grades_csv_and_class_html(
     assert float(rows["dave"]["total"]) == 0.0
     assert f"{SUBMISSION_FILE}: missing" in rows["dave"]["reason"]
     page = (out / "class.html").read_text()
-    assert 'href="alice/heading_pid/report.json"' in page
+    assert 'href="alice/heading_pid/report.html"' in page
     assert "addEventListener('click'" in page  # sortable
     assert "http://" not in page and "https://" not in page  # self-contained
 

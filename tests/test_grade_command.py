@@ -62,6 +62,10 @@ def test_reference_heading_pid_passes_and_the_report_holds_everything(
     assert "reason" in graded["controller"] and "output_tail" in graded["controller"]
     bag = Path(graded["recording"])
     assert (bag / "metadata.yaml").is_file() and list(bag.glob("*.mcap"))
+    page = (out / "heading_pid" / "report.html").read_text()
+    assert graded["report_html"] == "report.html"
+    assert page.count("<svg") >= 3 and "heading step: true heading and setpoint" in page
+    assert "src=" not in page and 'href="http' not in page  # self-contained
     # the controller ran in a copy: the submission folder is as it was handed in
     assert sorted(p.name for p in folder.iterdir()) == ["heading_pid.py"]
 

@@ -31,7 +31,9 @@ from typing import Any
 
 from grading import Scenario, controller_environment, evaluate, load_suite
 from grading.recorded import bag_folder, trajectory_from_bag
+from grading.report_page import report_html
 from grading.scenario import resolve_scenario_path
+from grading.trajectory import Sample
 from websim.grade_server import (
     MAX_MISSED_STEPS,
     RECORDING_DIR,
@@ -42,6 +44,7 @@ from websim.grade_server import (
 from websim.sandbox import SandboxLimits, SimulatorStartError, SubmissionSandbox
 
 REPORT_FILE = "report.json"
+PAGE_FILE = "report.html"
 
 WALL_CLOCK_MARGIN_S = 30.0
 """Wall-clock mode: a run's wall-clock limit is its duration, the controller's start and this."""
@@ -161,11 +164,16 @@ def grade_run(suite_path: Path, scenario: Scenario, command: Sequence[str],
         controller = sandbox.run_controller(command, env=controller_environment(scenario))
         server = sandbox.stop_server()
     wall_s = time.monotonic() - started
-    report = score_run(scenario, out, options, controller=asdict_controller(controller),
-                       controller_reason=controller.reason, server_tail=server.output_tail)
+    report, trajectory = score_run(
+        scenario, out, options, controller=asdict_controller(controller),
+        controller_reason=controller.reason, server_tail=server.output_tail)
     report["wall_time_s"] = round(wall_s, 3)
     sim_s = report["run"]["sim_time_s"] if report.get("run") else 0.0
     report["real_time_factor"] = round(sim_s / wall_s, 3) if wall_s > 0 else None
+    if trajectory:
+        report["report_html"] = PAGE_FILE
+        (out / PAGE_FILE).write_text(report_html(scenario, trajectory, report),
+                                     encoding="utf-8")
     return _write(out, report)
 
 
@@ -192,8 +200,11 @@ def wall_time_limit_s(scenario: Scenario, options: GradeOptions) -> float:
 
 def score_run(scenario: Scenario, out: Path, options: GradeOptions, *,
               controller: dict[str, Any], controller_reason: str,
-              server_tail: str) -> dict[str, Any]:
-    """The report of a run that has ended: its scenario's metrics on its recording."""
+              server_tail: str) -> tuple[dict[str, Any], list[Sample]]:
+    """The report of a run that has ended, and its trajectory (empty without a recording).
+
+    The report: its scenario's metrics measured on the recording's ground truth.
+    """
     base = {"scenario": scenario.name, "description": scenario.description,
             "source": scenario.source, "mode": options.mode, "step_on": options.step_on,
             "seed": scenario.seed, "duration_s": scenario.duration_s,
@@ -201,28 +212,28 @@ def score_run(scenario: Scenario, out: Path, options: GradeOptions, *,
     run_file = out / RUN_FILE
     if not run_file.is_file():
         return {**base, **_zero(f"the simulator did not say how the run ended; its output "
-                                f"ended with: {server_tail[-400:]}"), "run": None}
+                                f"ended with: {server_tail[-400:]}"), "run": None}, []
     run_end = json.loads(run_file.read_text())
     base["run"] = run_end
     try:
         bag = bag_folder(out / RECORDING_DIR)
         trajectory = trajectory_from_bag(bag, scenario, run_end["epoch_s"])
     except (FileNotFoundError, OSError, ValueError) as error:
-        return {**base, **_zero(f"the recording cannot be read: {error}")}
+        return {**base, **_zero(f"the recording cannot be read: {error}")}, []
     base["recording"] = str(bag)
     result = evaluate(scenario, trajectory)
     graded = result.to_json()
     graded.pop("name", None)
     ended_by = run_end["ended_by"]
     if ended_by in ("duration", "end_point"):
-        return {**base, **graded}
+        return {**base, **graded}, trajectory
     if ended_by == "stopped":
         why = (f"the controller ended before the run did (at t = {run_end['sim_time_s']:.2f} "
                f"s of {scenario.duration_s:g} s): {controller_reason}")
     else:
         why = run_end["reason"]
     return {**base, **graded, "score": 0.0, "passed": False, "reason": why,
-            "score_if_completed": graded["score"]}
+            "score_if_completed": graded["score"]}, trajectory
 
 
 def asdict_controller(result: Any) -> dict[str, Any]:
