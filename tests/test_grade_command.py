@@ -214,3 +214,22 @@ def test_bad_input_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixtur
     bad.write_text("world: empty\nduration_s: 5\nmetrics: [{kind: heading_stp}]\n")
     assert grade(str(bad), folder, tmp_path / "out", "python3", "heading_pid.py") == 2
     assert "did you mean 'heading_step'" in capsys.readouterr().err
+
+
+ROSLIB = SOLUTIONS.parent.parent / "web-interface" / "node_modules"
+
+
+@pytest.mark.skipif(shutil.which("node") is None or not (ROSLIB / "roslib").is_dir(),
+                    reason="Node or roslib missing: run npm ci in web-interface/")
+def test_roslibjs_heading_pid_grades_as_the_roslibpy_one(tmp_path: Path) -> None:
+    python_folder = submission(tmp_path / "py", "heading_pid.py")
+    node_folder = submission(tmp_path / "js", "heading_pid.js")
+    shutil.copytree(ROSLIB, node_folder / "node_modules", symlinks=True)
+    assert grade("heading_pid", python_folder, tmp_path / "out-py", "python3",
+                 "heading_pid.py") == 0
+    assert grade("heading_pid", node_folder, tmp_path / "out-js", "node", "heading_pid.js") == 0
+    by_python = report(tmp_path / "out-py", "heading_pid")
+    by_node = report(tmp_path / "out-js", "heading_pid")
+    assert by_node["passed"] is True and by_node["score"] == 1.0
+    # the same controller in two languages, in lock step: the same trajectory, to the digit
+    assert by_node["metrics"] == by_python["metrics"]
