@@ -179,7 +179,7 @@ def test_a_crash_scores_zero_with_its_last_output(tmp_path: Path) -> None:
     assert "no idea" in graded["controller"]["output_tail"]
 
 
-def test_the_controller_cannot_reset_the_graded_run(tmp_path: Path) -> None:
+def test_the_controller_cannot_reset_pause_or_fake_the_graded_run(tmp_path: Path) -> None:
     folder = submission(tmp_path / "ivan", "heading_pid.py", **{"reset.py": """\
         import os, time
         from urllib.parse import urlsplit
@@ -188,22 +188,32 @@ def test_the_controller_cannot_reset_the_graded_run(tmp_path: Path) -> None:
         url = urlsplit(os.environ["WEBSIM_URL"])
         ros = roslibpy.Ros(url.hostname, url.port)
         ros.run()
-        service = roslibpy.Service(ros, "/reset_simulation", "std_srvs/srv/Empty")
-        try:
-            service.call(roslibpy.ServiceRequest({}), timeout=5)
-            print("RESET ACCEPTED", flush=True)
-        except Exception as error:
-            print("RESET REFUSED:", error, flush=True)
-        HeadingPid(ros, 4.0)
+        for name, kind, args in (("/reset_simulation", "std_srvs/srv/Empty", {}),
+                                 ("/websim/pause", "websim/srv/Pause", {"paused": True})):
+            try:
+                roslibpy.Service(ros, name, kind).call(roslibpy.ServiceRequest(args), timeout=5)
+                print(name, "ACCEPTED", flush=True)
+            except Exception as error:
+                print(name, "REFUSED:", error, flush=True)
+        fake = roslibpy.Topic(ros, "/ground_truth", "nav_msgs/msg/Odometry")
+        fake.advertise()
+        for _ in range(3):  # a pose that "settled" at once, 9 m away
+            fake.publish(roslibpy.Message({"header": {"frame_id": "map"}, "pose": {"pose": {
+                "position": {"x": 9.0, "y": 9.0, "z": 0.0},
+                "orientation": {"x": 0.0, "y": 0.0, "z": 0.7071, "w": 0.7071}}}}))
+        HeadingPid(ros, 0.0)  # never turns: only a fake could pass it
         while ros.is_connected:
             time.sleep(0.2)
         """})
     out = tmp_path / "out"
     assert grade("heading_pid", folder, out, "python3", "reset.py") == 0
     graded = report(out, "heading_pid")
-    assert "RESET REFUSED" in graded["controller"]["output_tail"]
-    assert "cannot be reset" in graded["controller"]["output_tail"]
-    assert graded["passed"] is True
+    output = graded["controller"]["output_tail"]
+    assert "/reset_simulation REFUSED" in output and "cannot be reset" in output
+    assert "/websim/pause REFUSED" in output and "needs admin rights" in output
+    # graded on the robot's own ground truth, as recorded from its tap: the fake is not in it
+    assert graded["passed"] is False and graded["score"] == 0.0
+    assert "never settled" in graded["reason"]
 
 
 def test_bad_input_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
