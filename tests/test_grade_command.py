@@ -243,3 +243,14 @@ def test_roslibjs_heading_pid_grades_as_the_roslibpy_one(tmp_path: Path) -> None
     assert by_node["passed"] is True and by_node["score"] == 1.0
     # the same controller in two languages, in lock step: the same trajectory, to the digit
     assert by_node["metrics"] == by_python["metrics"]
+
+
+def test_reference_go_to_goal_passes_the_maze(tmp_path: Path) -> None:
+    folder = submission(tmp_path / "kim", "go_to_goal.py")
+    out = tmp_path / "out"
+    assert grade("go_to_goal", folder, out, "python3", "go_to_goal.py") == 0
+    graded = report(out, "go_to_goal")
+    assert graded["passed"] is True and graded["score"] > 0.9
+    by_name = {metric["name"]: metric for metric in graded["metrics"]}
+    assert by_name["collisions"]["value"] == 0
+    assert by_name["go_to_goal"]["value"] < 40.0  # seconds to the goal
