@@ -100,3 +100,20 @@ def test_run_autograder_writes_gradescope_results(tmp_path: Path) -> None:
     assert tests[0]["status"] == "passed" and tests[0]["score"] == tests[0]["max_score"]
     assert tests[1]["status"] == "failed" and "heading_step" in tests[1]["output"]
     assert results["score"] == pytest.approx(sum(test["score"] for test in tests), abs=1e-3)
+
+
+def test_run_autograder_without_a_submission_file_gives_a_readable_zero(tmp_path: Path) -> None:
+    root = tmp_path / "autograder"
+    shutil.copytree(GRADESCOPE, root / "source")
+    (root / "submission").mkdir(parents=True)
+    shutil.copy(SOLUTION, root / "submission" / SOLUTION.name)
+    env = {**os.environ, "AUTOGRADER_ROOT": str(root),
+           "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}",
+           "WEBSIM_GRADE_OPTIONS": "" if SANDBOXED else "--no-sandbox"}
+    done = subprocess.run(["bash", str(root / "source" / "run_autograder")], env=env,
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr
+    results = json.loads((root / "results" / "results.json").read_text())
+    assert results["score"] == 0.0
+    assert all(test["status"] == "failed" and test["score"] == 0.0 for test in results["tests"])
+    assert f"{SUBMISSION_FILE}: missing" in results["output"]

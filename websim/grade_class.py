@@ -216,11 +216,22 @@ def gradescope_results(summary: dict[str, Any], suite: Suite, out: Path,
             "visibility": "visible", "stdout_visibility": "visible"}
 
 
+def gradescope_refusal(suite: Suite, reason: str, total_points: float = 100.0
+                       ) -> dict[str, Any]:
+    """Gradescope's results.json for a submission that could not be run (every test 0)."""
+    weights = sum(entry.weight for entry in suite.entries)
+    tests = [{"name": entry.scenario.name, "score": 0.0,
+              "max_score": round(total_points * entry.weight / weights, 4),
+              "status": "failed", "output": f"not run: {reason}"} for entry in suite.entries]
+    return {"score": 0.0, "tests": tests, "output": f"websim grade: not graded: {reason}",
+            "visibility": "visible", "stdout_visibility": "visible"}
+
+
 def write_gradescope(path: Path, results: dict[str, Any]) -> None:
     """Write results.json (its folder made if needed)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(results, indent=2))
 
 
-__all__ = ["SUBMISSION_FILE", "grade_class", "gradescope_results", "submission_command",
-           "write_gradescope"]
+__all__ = ["SUBMISSION_FILE", "grade_class", "gradescope_refusal", "gradescope_results",
+           "submission_command", "write_gradescope"]

@@ -17,6 +17,7 @@ from physics import ConfigError
 from websim.grade_class import (
     SUBMISSION_FILE,
     grade_class,
+    gradescope_refusal,
     gradescope_results,
     submission_command,
     write_gradescope,
@@ -107,11 +108,20 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--submission {args.submission}: not a folder")
         command = list(args.controller)
         if not command:
-            if not (args.submission / SUBMISSION_FILE).is_file():
+            if args.gradescope is None and not (args.submission / SUBMISSION_FILE).is_file():
                 raise ConfigError("no controller command: give it after --, e.g. websim grade "
                                   "heading_pid.yaml -- python3 controller.py (or declare it "
                                   f"in the submission's {SUBMISSION_FILE})")
-            command = submission_command(args.submission)
+            try:
+                command = submission_command(args.submission)
+            except ConfigError as error:
+                if args.gradescope is None:
+                    raise
+                # the student's mistake, not the grader's: a 0 they can read, not a crash
+                write_gradescope(args.gradescope, gradescope_refusal(suite, str(error),
+                                                                     args.points))
+                print(f"{suite.name}: not graded: {error}", flush=True)
+                return 0
         summary = grade_submission(args.suite, command, args.submission, args.out, options)
     except SandboxUnavailableError as error:
         raise ConfigError(str(error)) from None
