@@ -254,3 +254,14 @@ def test_reference_go_to_goal_passes_the_maze(tmp_path: Path) -> None:
     by_name = {metric["name"]: metric for metric in graded["metrics"]}
     assert by_name["collisions"]["value"] == 0
     assert by_name["go_to_goal"]["value"] < 40.0  # seconds to the goal
+
+
+def test_the_slew_limited_heading_pid_passes_the_payload_bonus(tmp_path: Path) -> None:
+    folder = submission(tmp_path / "lee", "heading_pid.py")
+    out = tmp_path / "out"
+    assert grade("heading_pid_payload", folder, out, "python3", "heading_pid.py", "--slew",
+                 "0.25") == 0
+    graded = report(out, "heading_pid_payload")
+    assert graded["passed"] is True and graded["score"] == 1.0
+    steps = graded["metrics"][0]["figures"]["steps"]
+    assert len(steps) == 2 and all(step["settling_time_s"] < 3.0 for step in steps)

@@ -8,11 +8,18 @@ the odom frame) and holds it. It answers every /odom with one /cmd_vel (a callba
 timer), so ``websim grade`` can run it in deterministic mode. A setpoint that changes
 during the run (WEBSIM_SETPOINT_RAD_CHANGES, ``at_s:value`` pairs) is applied at the first
 /odom whose time since the start reaches it. WEBSIM_KP overrides the gain (default 4 rad/s
-per rad). Needs ``pip install roslibpy``.
+per rad). For the payload bonus (``heading_pid_payload``), ``--slew RPS`` limits how much
+the command may change per /odom, so the wheels never slip (``--slew 0.25``: 0.5 rad/s per
+0.1 s)::
+
+    websim grade heading_pid_payload -- python3 heading_pid.py --slew 0.25
+
+Needs ``pip install roslibpy``.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import time
@@ -41,8 +48,10 @@ def changes(text: str) -> list[tuple[float, float]]:
 class HeadingPid:
     """error = wrap(setpoint - yaw); command = clamp(kp error)."""
 
-    def __init__(self, ros: roslibpy.Ros, kp: float) -> None:
+    def __init__(self, ros: roslibpy.Ros, kp: float, slew_rps: float | None = None) -> None:
         self.kp = kp
+        self.slew_rps = slew_rps
+        self.last_rps = 0.0
         self.setpoint = float(os.environ["WEBSIM_SETPOINT_RAD"])
         self.changes = changes(os.environ.get("WEBSIM_SETPOINT_RAD_CHANGES", ""))
         self.first_stamp: float | None = None
@@ -62,16 +71,24 @@ class HeadingPid:
         yaw = 2.0 * math.atan2(q["z"], q["w"])
         angular = max(-MAX_ANGULAR_RPS, min(MAX_ANGULAR_RPS,
                                             self.kp * wrap(self.setpoint - yaw)))
+        if self.slew_rps is not None:  # at most this change per /odom: the wheels do not slip
+            angular = min(self.last_rps + self.slew_rps,
+                          max(self.last_rps - self.slew_rps, angular))
+        self.last_rps = angular
         self.cmd.publish(roslibpy.Message({"linear": {"x": 0.0, "y": 0.0, "z": 0.0},
                                            "angular": {"x": 0.0, "y": 0.0, "z": angular}}))
 
 
 def main() -> None:
     """Connect to WEBSIM_URL and control until the simulator closes the connection."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--slew", type=float, default=None, metavar="RPS",
+                        help="largest change of the command per /odom (rad/s)")
+    args = parser.parse_args()
     url = urlsplit(os.environ.get("WEBSIM_URL", "ws://localhost:9090"))
     ros = roslibpy.Ros(url.hostname or "localhost", url.port or 9090)
     ros.run()
-    HeadingPid(ros, float(os.environ.get("WEBSIM_KP", "4.0")))
+    HeadingPid(ros, float(os.environ.get("WEBSIM_KP", "4.0")), args.slew)
     while ros.is_connected:
         time.sleep(0.2)
 
