@@ -19,6 +19,7 @@ from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Session
 from rosbridge.core.outbox import Outbox
 from rosbridge.core.schema import MAX_QUEUE_LENGTH
+from rosbridge.transport.schedule import Schedule
 
 TICKS = 40
 
@@ -70,3 +71,34 @@ def test_an_overloaded_loop_sheds_scans_and_keeps_odometry() -> None:
     assert topics.count("/scan") + server.stats.scans_shed == server.stats.ticks // 2
     assert server.stats.scans_cast == topics.count("/scan")  # a shed scan is not even cast
     assert server.health()["scans_shed"] == server.stats.scans_shed
+
+
+def test_a_gate_holds_the_ticks_without_making_them_late() -> None:
+    """``Schedule.gates``: no tick runs while a gate holds; the time it held is not lateness."""
+    schedule = Schedule(0.05)
+    lateness: list[float] = []
+    opened = asyncio.Event()
+    held_s = 0.4
+
+    async def gate() -> None:
+        if len(lateness) == 2:  # hold the third tick until opened
+            await opened.wait()
+
+    schedule.gates.append(gate)
+
+    async def main() -> int:
+        task = asyncio.create_task(schedule.run(lateness.append))
+        while len(lateness) < 2:
+            await asyncio.sleep(0.005)
+        await asyncio.sleep(held_s)
+        ticks_while_held = len(lateness)
+        opened.set()
+        while len(lateness) < 6:
+            await asyncio.sleep(0.005)
+        task.cancel()
+        return ticks_while_held
+
+    assert asyncio.run(main()) == 2
+    assert schedule.resyncs == 0
+    # after the hold the ticks go on from when it opened: none is 0.4 s late
+    assert max(lateness[2:]) < held_s / 2

@@ -25,7 +25,7 @@ from rosbridge.core.clock import (
     SimClock,
     WallClock,
 )
-from websim import compare_command, map_command, sites
+from websim import compare_command, grade_command, map_command, sites
 from websim import replay as replay_command
 from websim import serve as serve_command
 
@@ -98,6 +98,16 @@ def build_parser() -> argparse.ArgumentParser:
                     "hash $robot consistent: the same name always reaches the same worker.")
     nginx_config.add_arguments(proxy)
     proxy.set_defaults(run=nginx_config.run)
+
+    grade = commands.add_parser(
+        "grade", usage="websim grade SCENARIO_OR_SUITE [options] -- COMMAND...",
+        help="grade a controller on a scenario or suite: a private simulator, a sandbox, a "
+             "recording, a score (docs/grading.md)",
+        description="Run the controller COMMAND (given after --) against a private simulator "
+                    "set up by each scenario, in a sandbox, record the run and score it from "
+                    "the recording's ground truth; report.json per run.")
+    grade_command.add_arguments(grade)
+    grade.set_defaults(run=grade_command.run)
 
     map_files = commands.add_parser(
         "map", help="write a world's occupancy map as nav2 map_server's NAME.yaml and NAME.pgm",
@@ -266,7 +276,16 @@ def _run_replay(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``websim`` with ``argv`` (default: the process arguments); returns the exit code."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    arguments = list(sys.argv[1:] if argv is None else argv)
+    tail: list[str] | None = None
+    if "--" in arguments:  # websim grade ... -- COMMAND: the controller's, never parsed
+        split = arguments.index("--")
+        arguments, tail = arguments[:split], arguments[split + 1:]
+    args = parser.parse_args(arguments)
+    if tail is not None:
+        if not hasattr(args, "controller"):
+            parser.error("'-- COMMAND' is for websim grade only")
+        args.controller = tail
     if args.command is None:
         parser.print_help()
         return 0

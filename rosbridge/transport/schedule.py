@@ -14,14 +14,16 @@ pace slows the run, never loses its messages. A client that has not taken its fr
 ``CLIENT_WAIT_S`` is released: the ticks go on without waiting for it (it gets the newest of
 each topic, as a slow client does at real time) until it has caught up, and the connection's
 stall watchdog closes it if its socket keeps taking nothing. Whatever else must keep up
-with the ticks (a recording's writer) is waited for the same way (``pacers``).
+with the ticks (a recording's writer) is waited for the same way (``pacers``). A ``gate`` holds
+the next tick for as long as it says, whatever the speed (a graded run in lock step with its
+controller: ``websim.grade_server``); the time it held is not counted late.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 
 from rosbridge.core.clock import WALL_CLOCK, Clock, SimClock
 from rosbridge.transport.writers import Writers
@@ -78,6 +80,9 @@ class Schedule:
         pacers: above real time, waited for as clients are: each says whether it has taken
             what the ticks gave it (a recording's writer, ``ros_nodes.recording``); one that
             has not within ``CLIENT_WAIT_S`` is not waited for at that tick.
+        gates: awaited in turn before every tick, at any speed: each holds the tick as long
+            as it must and bounds its own wait (the schedule waits for nothing else so
+            long); the time they held moves the deadlines on.
         writers: the connections of the loop, where flushes are written.
 
     Raises:
@@ -100,6 +105,7 @@ class Schedule:
         self.clients_released = 0
         self.tick_listeners: list[Callable[[], None]] = []
         self.pacers: list[Callable[[], bool]] = []
+        self.gates: list[Callable[[], Awaitable[None]]] = []
         self._ticks = 0
         self._next_deadline_s: float | None = None
 
@@ -118,6 +124,11 @@ class Schedule:
                 await asyncio.sleep(0)  # the clients read and write between ticks
             if self.ahead:
                 await self._wait_for_clients()
+            if self.gates:
+                gated_s = clock.monotonic_s()
+                for gate in self.gates:
+                    await gate()
+                deadline += max(0.0, clock.monotonic_s() - max(gated_s, deadline))
             now = clock.monotonic_s()
             if self.ahead:
                 deadline = max(deadline, now - CATCH_UP_S)

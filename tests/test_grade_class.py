@@ -1,0 +1,119 @@
+"""``websim grade --submissions``: a class graded at once (grades.csv, class.html), and the
+Gradescope example's run_autograder on a fake /autograder tree, its results.json checked."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from physics import ConfigError
+from websim import cli
+from websim.grade_class import SUBMISSION_FILE, submission_command
+
+ROOT = Path(__file__).resolve().parent.parent
+SOLUTION = ROOT / "examples" / "solutions" / "heading_pid.py"
+GRADESCOPE = ROOT / "examples" / "gradescope"
+SANDBOXED = shutil.which("bwrap") is not None and os.geteuid() == 0
+"""Where the sandbox can run, the tests grade in it; elsewhere with --no-sandbox (no skip)."""
+
+
+def student(folder: Path, command: str | None, **files: str) -> None:
+    folder.mkdir(parents=True)
+    shutil.copy(SOLUTION, folder / SOLUTION.name)
+    if command is not None:
+        (folder / SUBMISSION_FILE).write_text(f"command: {command}\n")
+    for name, text in files.items():
+        (folder / name).write_text(text)
+
+
+def test_a_class_is_graded_into_grades_csv_and_class_html(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    submissions = tmp_path / "submissions"
+    student(submissions / "alice", "python3 heading_pid.py")
+    student(submissions / "bob", "env WEBSIM_KP=-4 python3 heading_pid.py")
+    student(submissions / "carol", "python3 crash.py", **{"crash.py": "print('oops')\n1/0\n"})
+    student(submissions / "dave", None)
+    out = tmp_path / "out"
+    sandbox = () if SANDBOXED else ("--no-sandbox",)
+    assert cli.main(["grade", "heading_pid", "--submissions", str(submissions), "--out",
+                     str(out), *sandbox]) == 0
+    assert "4 submissions graded" in capsys.readouterr().out
+    with (out / "grades.csv").open() as file:
+        rows = {row["student"]: row for row in csv.DictReader(file)}
+    assert list(rows) == ["alice", "bob", "carol", "dave"]
+    assert float(rows["alice"]["heading_pid"]) == 1.0 and rows["alice"]["reason"] == "passed"
+    assert float(rows["alice"]["total"]) == 1.0
+    assert float(rows["bob"]["total"]) == 0.0
+    assert rows["bob"]["reason"].startswith("heading_pid: heading_step: ")
+    assert float(rows["carol"]["total"]) == 0.0
+    assert "ZeroDivisionError" in json.loads(
+        (out / "carol" / "heading_pid" / "report.json").read_text())["controller"]["output_tail"]
+    assert "exited with code 1" in rows["carol"]["reason"]
+    assert float(rows["dave"]["total"]) == 0.0
+    assert f"{SUBMISSION_FILE}: missing" in rows["dave"]["reason"]
+    page = (out / "class.html").read_text()
+    assert 'href="alice/heading_pid/report.html"' in page
+    assert "addEventListener('click'" in page  # sortable
+    assert "http://" not in page and "https://" not in page  # self-contained
+
+
+def test_a_submission_file_is_checked(tmp_path: Path) -> None:
+    (tmp_path / SUBMISSION_FILE).write_text("command: [python3, a.py]\n")
+    assert submission_command(tmp_path) == ["python3", "a.py"]
+    (tmp_path / SUBMISSION_FILE).write_text("comand: python3 a.py\n")
+    with pytest.raises(ConfigError, match=r"expected only .command: \.\.\.."):
+        submission_command(tmp_path)
+    (tmp_path / SUBMISSION_FILE).write_text("command: 'python3 \"a.py'\n")
+    with pytest.raises(ConfigError, match="command: No closing quotation"):
+        submission_command(tmp_path)
+
+
+def test_run_autograder_writes_gradescope_results(tmp_path: Path) -> None:
+    root = tmp_path / "autograder"
+    source, submission = root / "source", root / "submission"
+    shutil.copytree(GRADESCOPE, source)
+    submission.mkdir(parents=True)
+    shutil.copy(SOLUTION, submission / SOLUTION.name)
+    shutil.copy(GRADESCOPE / SUBMISSION_FILE, submission / SUBMISSION_FILE)
+    (root / "results").mkdir()
+    env = {**os.environ, "AUTOGRADER_ROOT": str(root),
+           "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}",
+           "WEBSIM_GRADE_OPTIONS": "--points 10" + ("" if SANDBOXED else " --no-sandbox")}
+    done = subprocess.run(["bash", str(source / "run_autograder")], env=env,
+                          capture_output=True, text=True, timeout=600, check=False)
+    assert done.returncode == 0, done.stderr
+    results = json.loads((root / "results" / "results.json").read_text())
+    tests = results["tests"]
+    assert [test["name"] for test in tests] == ["heading_pid", "heading_pid_payload"]
+    for test in tests:
+        assert set(test) >= {"name", "score", "max_score", "status", "output"}
+        assert test["status"] in ("passed", "failed")
+        assert 0.0 <= test["score"] <= test["max_score"]
+    assert [test["max_score"] for test in tests] == pytest.approx([20 / 3, 10 / 3], abs=1e-3)
+    assert tests[0]["status"] == "passed" and tests[0]["score"] == tests[0]["max_score"]
+    assert tests[1]["status"] == "failed" and "heading_step" in tests[1]["output"]
+    assert results["score"] == pytest.approx(sum(test["score"] for test in tests), abs=1e-3)
+
+
+def test_run_autograder_without_a_submission_file_gives_a_readable_zero(tmp_path: Path) -> None:
+    root = tmp_path / "autograder"
+    shutil.copytree(GRADESCOPE, root / "source")
+    (root / "submission").mkdir(parents=True)
+    shutil.copy(SOLUTION, root / "submission" / SOLUTION.name)
+    env = {**os.environ, "AUTOGRADER_ROOT": str(root),
+           "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}",
+           "WEBSIM_GRADE_OPTIONS": "" if SANDBOXED else "--no-sandbox"}
+    done = subprocess.run(["bash", str(root / "source" / "run_autograder")], env=env,
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr
+    results = json.loads((root / "results" / "results.json").read_text())
+    assert results["score"] == 0.0
+    assert all(test["status"] == "failed" and test["score"] == 0.0 for test in results["tests"])
+    assert f"{SUBMISSION_FILE}: missing" in results["output"]

@@ -1,0 +1,133 @@
+"""``websim grade SCENARIO_OR_SUITE [--out DIR] -- COMMAND...``: the command's arguments.
+
+One submission (``--submission DIR``, default this folder; its command after ``--``, else
+the one its ``websim-submission.yaml`` declares), a class (``--submissions DIR``: a folder
+per student, ``websim.grade_class``), and Gradescope's ``results.json`` (``--gradescope``).
+The work is ``websim.grade_run`` (a submission's runs and reports); exit code 0 when the runs
+ran, whatever their scores, 2 for bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from grading import load_suite
+from physics import ConfigError
+from websim.grade_class import (
+    SUBMISSION_FILE,
+    grade_class,
+    gradescope_refusal,
+    gradescope_results,
+    submission_command,
+    write_gradescope,
+)
+from websim.grade_run import GradeOptions, grade_submission
+from websim.grade_server import MODES, STARTUP_TIMEOUT_S, STEP_ON
+from websim.sandbox import SandboxUnavailableError
+
+GRADESCOPE_RESULTS = Path("/autograder/results/results.json")
+"""Where Gradescope reads an autograder's results."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``websim grade``'s options."""
+    parser.add_argument("suite", metavar="SCENARIO_OR_SUITE",
+                        help="a scenario or suite file, or a shipped one's name (heading_pid)")
+    parser.set_defaults(controller=[])  # what follows --: websim.cli.main splits it off
+    parser.add_argument("--out", type=Path, default=Path("grade-out"), metavar="DIR",
+                        help="where reports and recordings go (default grade-out)")
+    parser.add_argument("--submission", type=Path, default=Path("."), metavar="DIR",
+                        help="the submission's folder: the controller runs in a copy of it "
+                             "(default: this folder); without a command after --, the one "
+                             f"its {SUBMISSION_FILE} declares")
+    parser.add_argument("--submissions", type=Path, default=None, metavar="DIR",
+                        help=f"grade a class: every folder of DIR is a student's submission "
+                             f"with its {SUBMISSION_FILE}; writes grades.csv and class.html")
+    parser.add_argument("--jobs", type=_positive_int, default=None, metavar="N",
+                        help="with --submissions: submissions graded at once (default: the "
+                             "machine's cores)")
+    parser.add_argument("--gradescope", nargs="?", type=Path, const=GRADESCOPE_RESULTS,
+                        default=None, metavar="RESULTS_JSON",
+                        help="also write Gradescope's results.json (default path "
+                             f"{GRADESCOPE_RESULTS})")
+    parser.add_argument("--points", type=float, default=100.0,
+                        help="with --gradescope: the suite's points (default 100)")
+    parser.add_argument("--mode", choices=MODES, default="deterministic",
+                        help="deterministic (default): on sim time, the simulation waits for "
+                             "the controller's command each time it is due; wall-clock: at 1x, "
+                             "for any program")
+    parser.add_argument("--step-on", choices=tuple(STEP_ON), default="odom",
+                        help="deterministic mode: the controller answers each /odom (default), "
+                             "each /scan, or at the scenario's controller_rate_hz (a timer "
+                             "on sim time)")
+    parser.add_argument("--runs", type=_positive_int, default=1, metavar="N",
+                        help="runs per scenario: the score is their median, their spread is "
+                             "printed (default 1)")
+    parser.add_argument("--startup-timeout", type=float, default=STARTUP_TIMEOUT_S,
+                        metavar="S",
+                        help="how long the controller may take to connect (and, in "
+                             "deterministic mode, subscribe) before the run is scored 0 "
+                             f"(default {STARTUP_TIMEOUT_S:g} s of wall time)")
+    parser.add_argument("--no-sandbox", action="store_true",
+                        help="run the controller without a sandbox (only for code you trust)")
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
+    if not 1 <= value <= 100:
+        raise argparse.ArgumentTypeError(f"expected 1 to 100, got {value}")
+    return value
+
+
+def run(args: argparse.Namespace) -> int:
+    """Grade a submission or a class; 0 when the runs ran, 2 for bad input."""
+    suite = load_suite(args.suite)
+    if not 0.0 < args.startup_timeout <= 3600.0:
+        raise ConfigError(f"--startup-timeout: expected 0 to 3600 s, got {args.startup_timeout}")
+    options = GradeOptions(args.mode, args.step_on, not args.no_sandbox, args.runs,
+                           args.startup_timeout)
+    try:
+        if args.submissions is not None:
+            if args.controller or args.gradescope is not None:
+                raise ConfigError("--submissions takes each command from its folder's "
+                                  f"{SUBMISSION_FILE} (no -- COMMAND, no --gradescope)")
+            if not args.submissions.is_dir():
+                raise ConfigError(f"--submissions {args.submissions}: not a folder")
+            rows = grade_class(args.suite, suite, args.submissions, args.out, options,
+                               args.jobs)
+            for row in rows:
+                print(f"{row['student']}: {row['total']:.4f} {row['reason']}", flush=True)
+            print(f"{suite.name}: {len(rows)} submissions graded; {args.out / 'grades.csv'}, "
+                  f"{args.out / 'class.html'}", flush=True)
+            return 0
+        if not args.submission.is_dir():
+            raise ConfigError(f"--submission {args.submission}: not a folder")
+        command = list(args.controller)
+        if not command:
+            if args.gradescope is None and not (args.submission / SUBMISSION_FILE).is_file():
+                raise ConfigError("no controller command: give it after --, e.g. websim grade "
+                                  "heading_pid.yaml -- python3 controller.py (or declare it "
+                                  f"in the submission's {SUBMISSION_FILE})")
+            try:
+                command = submission_command(args.submission)
+            except ConfigError as error:
+                if args.gradescope is None:
+                    raise
+                # the student's mistake, not the grader's: a 0 they can read, not a crash
+                write_gradescope(args.gradescope, gradescope_refusal(suite, str(error),
+                                                                     args.points))
+                print(f"{suite.name}: not graded: {error}", flush=True)
+                return 0
+        summary = grade_submission(args.suite, command, args.submission, args.out, options)
+    except SandboxUnavailableError as error:
+        raise ConfigError(str(error)) from None
+    if args.gradescope is not None:
+        write_gradescope(args.gradescope,
+                         gradescope_results(summary, suite, args.out, args.points))
+    print(f"{suite.name}: total {summary['total']:.3f} "
+          f"({len(summary['scenarios'])} scenario(s); reports in {args.out})", flush=True)
+    return 0

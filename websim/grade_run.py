@@ -1,0 +1,278 @@
+"""One submission graded on a suite: its runs, their reports (``websim grade``'s work).
+
+For each scenario of the suite (a scenario file is a suite of one), and each of ``--runs``:
+
+1. a sandbox for the submission (``websim.sandbox.SubmissionSandbox``; ``--no-sandbox``
+   without), and in it the private simulator, ``python -m websim.grade_server`` (the
+   scenario's robot and world, its timed changes, lock step in deterministic mode, the
+   recording, ``run.json``);
+2. the controller, ``COMMAND`` in a copy of ``--submission`` (default: this folder), with
+   ``WEBSIM_URL`` and the scenario's ``WEBSIM_<NAME>``, until it exits or the run ends;
+3. the score, from the recording's ground truth (``grading.recorded``) by the scenario's
+   metrics (``grading.evaluate``); a run that did not run its course (the controller never
+   subscribed, stopped answering, or ended first) scores 0 with the reason.
+
+Each run writes ``report.json`` in ``DIR/SCENARIO/`` (``DIR/SCENARIO/run-K/`` with
+``--runs``), prints one line per scenario, and the suite's total; the exit code is 0 when
+the runs ran, whatever their scores, 2 for bad input.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from grading import Scenario, controller_environment, evaluate, load_suite
+from grading.recorded import bag_folder, trajectory_from_bag
+from grading.report_page import report_html
+from grading.scenario import resolve_scenario_path
+from grading.trajectory import Sample
+from websim.grade_server import (
+    MAX_MISSED_STEPS,
+    RECORDING_DIR,
+    RUN_FILE,
+    STARTUP_TIMEOUT_S,
+    STEP_TIMEOUT_S,
+)
+from websim.sandbox import SandboxLimits, SimulatorStartError, SubmissionSandbox
+
+REPORT_FILE = "report.json"
+PAGE_FILE = "report.html"
+
+WALL_CLOCK_MARGIN_S = 30.0
+"""Wall-clock mode: a run's wall-clock limit is its duration, the controller's start and this."""
+
+WALL_CLOCK_SCORE_TOLERANCE = 0.05
+"""Wall-clock mode: how far apart (range) the scores of re-runs of a sound controller may be.
+Measured: the reference heading PID 0 (its settling time 1.10-1.15 s, within every limit); a
+controller near a limit moves with the host's load, which is why deterministic mode exists."""
+
+DETERMINISTIC_WALL_FACTOR = 4.0
+"""Deterministic mode: a run may take this many times its duration in wall time (a
+controller answering in 0.2 s each 0.05 s tick), besides its start and missed steps."""
+
+
+@dataclass(frozen=True)
+class GradeOptions:
+    """How the submission's runs are made.
+
+    Attributes:
+        mode: ``deterministic`` or ``wall-clock`` (``websim.grade_server.MODES``).
+        step_on: what a deterministic controller answers (``grade_server.STEP_ON``).
+        sandboxed: in a sandbox (False: ``--no-sandbox``).
+        runs: runs per scenario (the score is their median; the spread is reported).
+        startup_timeout_s: how long the controller may take to connect (wall time, s).
+    """
+
+    mode: str = "deterministic"
+    step_on: str = "odom"
+    sandboxed: bool = True
+    runs: int = 1
+    startup_timeout_s: float = STARTUP_TIMEOUT_S
+
+
+def grade_submission(suite_file: str | Path, command: Sequence[str], submission: Path,
+                     out: Path, options: GradeOptions, *,
+                     quiet: bool = False) -> dict[str, Any]:
+    """Grade one submission on every scenario of a suite; writes ``out/summary.json``.
+
+    Returns:
+        The summary: the suite's name, ``total`` (the weighted scores), and per scenario its
+        name, weight, score, passed, reason and report's path.
+
+    Raises:
+        ConfigError: the suite file is invalid.
+        SandboxUnavailableError: the sandbox cannot run here (and ``sandboxed``).
+    """
+    suite = load_suite(suite_file)
+    suite_path = resolve_scenario_path(suite_file).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for entry in suite.entries:
+        report = grade_scenario(suite_path, entry.scenario, command, submission,
+                                out / entry.scenario.name, options)
+        if not quiet:
+            print(summary_line(report), flush=True)
+        rows.append({"name": entry.scenario.name, "weight": entry.weight,
+                     "score": report["score"], "passed": report["passed"],
+                     "reason": report["reason"],
+                     "report": str(Path(entry.scenario.name) / REPORT_FILE)})
+    total = sum(row["weight"] * row["score"] for row in rows) / sum(row["weight"] for row in rows)
+    summary = {"suite": suite.name, "total": min(1.0, total), "mode": options.mode,
+               "scenarios": rows}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+def grade_scenario(suite_path: Path, scenario: Scenario, command: Sequence[str],
+                   submission: Path, out: Path, options: GradeOptions) -> dict[str, Any]:
+    """Grade one scenario (``options.runs`` runs); writes and returns its ``report.json``."""
+    out.mkdir(parents=True, exist_ok=True)
+    if options.runs == 1:
+        report = grade_run(suite_path, scenario, command, submission, out, options)
+    else:
+        runs = [grade_run(suite_path, scenario, command, submission, out / f"run-{k + 1}",
+                          options) for k in range(options.runs)]
+        scores = [run_report["score"] for run_report in runs]
+        median = statistics.median(scores)
+        chosen = min(runs, key=lambda run_report: abs(run_report["score"] - median))
+        report = {**chosen, "score": median,
+                  "runs": [{"score": r["score"], "passed": r["passed"], "reason": r["reason"],
+                            "report": str(Path(f"run-{k + 1}") / REPORT_FILE)}
+                           for k, r in enumerate(runs)],
+                  "spread": {"scores": scores, "median": median,
+                             "range": max(scores) - min(scores),
+                             "stdev": statistics.pstdev(scores),
+                             "metric_values": _metric_spread(runs)}}
+        (out / REPORT_FILE).write_text(json.dumps(report, indent=2))
+    return report
+
+
+def grade_run(suite_path: Path, scenario: Scenario, command: Sequence[str],
+              submission: Path, out: Path, options: GradeOptions) -> dict[str, Any]:
+    """One run of one scenario: sandbox, simulator, controller, score; writes report.json."""
+    out.mkdir(parents=True, exist_ok=True)
+    for stale in (out / RUN_FILE, out / REPORT_FILE):
+        stale.unlink(missing_ok=True)
+    recording_dir = out / RECORDING_DIR
+    if recording_dir.exists():
+        for bag in recording_dir.iterdir():
+            if bag.is_dir():
+                for item in bag.iterdir():
+                    item.unlink()
+                bag.rmdir()
+    limits = SandboxLimits(wall_time_s=wall_time_limit_s(scenario, options))
+    started = time.monotonic()
+    with SubmissionSandbox(submission, limits=limits, no_sandbox=not options.sandboxed,
+                           hidden_paths=[out.resolve()]) as sandbox:
+        argv = [sys.executable, "-m", "websim.grade_server", str(suite_path),
+                "--scenario", scenario.name, "--out", str(out.resolve()),
+                "--mode", options.mode, "--step-on", options.step_on,
+                "--startup-timeout", repr(options.startup_timeout_s),
+                "--ws-port", str(sandbox.ws_port), "--http-port", str(sandbox.http_port)]
+        try:
+            sandbox.start_server(argv, env=dict(os.environ))
+        except SimulatorStartError as error:
+            return _write(out, _grader_error(scenario, options, f"{error}"))
+        controller = sandbox.run_controller(command, env=controller_environment(scenario))
+        server = sandbox.stop_server()
+    wall_s = time.monotonic() - started
+    report, trajectory = score_run(
+        scenario, out, options, controller=asdict_controller(controller),
+        controller_reason=controller.reason, server_tail=server.output_tail)
+    report["wall_time_s"] = round(wall_s, 3)
+    sim_s = report["run"]["sim_time_s"] if report.get("run") else 0.0
+    report["real_time_factor"] = round(sim_s / wall_s, 3) if wall_s > 0 else None
+    if trajectory:
+        report["report_html"] = PAGE_FILE
+        (out / PAGE_FILE).write_text(report_html(scenario, trajectory, report),
+                                     encoding="utf-8")
+    return _write(out, report)
+
+
+def _metric_spread(runs: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Each metric's value over the runs: the values, their range (None if one is None)."""
+    spread: dict[str, dict[str, Any]] = {}
+    for run_report in runs:
+        for metric in run_report.get("metrics", []):
+            spread.setdefault(metric["name"], {"values": []})["values"].append(metric["value"])
+    for entry in spread.values():
+        values = entry["values"]
+        entry["range"] = (max(values) - min(values)) if None not in values else None
+    return spread
+
+
+def wall_time_limit_s(scenario: Scenario, options: GradeOptions) -> float:
+    """The controller's wall-clock limit for one run of ``scenario``."""
+    start_s = options.startup_timeout_s + WALL_CLOCK_MARGIN_S
+    if options.mode == "wall-clock":
+        return start_s + scenario.duration_s
+    return (start_s + DETERMINISTIC_WALL_FACTOR * scenario.duration_s
+            + MAX_MISSED_STEPS * STEP_TIMEOUT_S)
+
+
+def score_run(scenario: Scenario, out: Path, options: GradeOptions, *,
+              controller: dict[str, Any], controller_reason: str,
+              server_tail: str) -> tuple[dict[str, Any], list[Sample]]:
+    """The report of a run that has ended, and its trajectory (empty without a recording).
+
+    The report: its scenario's metrics measured on the recording's ground truth.
+    """
+    base = {"scenario": scenario.name, "description": scenario.description,
+            "source": scenario.source, "mode": options.mode, "step_on": options.step_on,
+            "seed": scenario.seed, "duration_s": scenario.duration_s,
+            "controller": controller}
+    run_file = out / RUN_FILE
+    if not run_file.is_file():
+        return {**base, **_zero(f"the simulator did not say how the run ended; its output "
+                                f"ended with: {server_tail[-400:]}"), "run": None}, []
+    run_end = json.loads(run_file.read_text())
+    base["run"] = run_end
+    try:
+        bag = bag_folder(out / RECORDING_DIR)
+        trajectory = trajectory_from_bag(bag, scenario, run_end["epoch_s"])
+    except (FileNotFoundError, OSError, ValueError) as error:
+        return {**base, **_zero(f"the recording cannot be read: {error}")}, []
+    base["recording"] = str(bag)
+    result = evaluate(scenario, trajectory)
+    graded = result.to_json()
+    graded.pop("name", None)
+    ended_by = run_end["ended_by"]
+    if ended_by in ("duration", "end_point"):
+        return {**base, **graded}, trajectory
+    if ended_by == "stopped":
+        why = (f"the controller ended before the run did (at t = {run_end['sim_time_s']:.2f} "
+               f"s of {scenario.duration_s:g} s): {controller_reason}")
+    else:
+        why = run_end["reason"]
+    return {**base, **graded, "score": 0.0, "passed": False, "reason": why,
+            "score_if_completed": graded["score"]}, trajectory
+
+
+def asdict_controller(result: Any) -> dict[str, Any]:
+    """The controller's sandbox result as JSON, its limits and reason included."""
+    data = asdict(result)
+    data["reason"] = result.reason
+    data["output_truncated"] = result.output_truncated
+    data["command"] = list(result.command)
+    return data
+
+
+def summary_line(report: dict[str, Any]) -> str:
+    """One line per scenario: score, verdict, reason, and how the run went."""
+    verdict = "passed" if report["passed"] else "failed"
+    line = f"{report['scenario']}: {report['score']:.4f} {verdict}: {report['reason']}"
+    run_end = report.get("run")
+    if run_end:
+        line += (f" [{report['mode']}, {run_end['sim_time_s']:.1f} s of sim time in "
+                 f"{report.get('wall_time_s', 0.0):.1f} s")
+        if report.get("real_time_factor"):
+            line += f", {report['real_time_factor']:.1f}x real time"
+        line += "]"
+    spread = report.get("spread")
+    if spread:
+        line += (f" median of {len(spread['scores'])} runs, spread {spread['range']:.4f} "
+                 f"(scores {', '.join(f'{s:.4f}' for s in spread['scores'])})")
+    return line
+
+
+def _zero(reason: str) -> dict[str, Any]:
+    return {"score": 0.0, "passed": False, "reason": reason, "metrics": []}
+
+
+def _grader_error(scenario: Scenario, options: GradeOptions, reason: str) -> dict[str, Any]:
+    return {"scenario": scenario.name, "mode": options.mode, "run": None,
+            "controller": None, "grader_error": True, **_zero(reason)}
+
+
+def _write(out: Path, report: dict[str, Any]) -> dict[str, Any]:
+    (out / REPORT_FILE).write_text(json.dumps(report, indent=2))
+    return report
+
