@@ -360,6 +360,15 @@ class VirtualRobotNode(Node):
         for spec, msg in publications:
             self._publish_one(spec.name, msg)
 
+    def subscription_count(self, topic: str) -> int:
+        """Subscriptions of the graph the robot's publisher of ``topic`` has matched.
+
+        They get what it publishes (``/odom``, ``/clock``...) from now on; 0 for a topic the
+        node does not publish.
+        """
+        publisher = self._robot_publishers.get(topic)
+        return 0 if publisher is None else int(publisher.get_subscription_count())
+
     def _publish_tapped(self, direction: str, topic: str, type_name: str, msg: Message,
                         sim_time_s: float) -> None:
         """The robot's tap: publish what it publishes (what it accepts came from a client)."""

@@ -69,6 +69,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="how long the controller may take to connect (and, in "
                              "deterministic mode, subscribe) before the run is scored 0 "
                              f"(default {STARTUP_TIMEOUT_S:g} s of wall time)")
+    parser.add_argument("--ros", action="store_true",
+                        help="the controller is an rclpy node: the simulator starts the ROS "
+                             "graph, the controller gets a ROS_DOMAIN_ID of its run and "
+                             "--ros-args -p use_sim_time:=true after its command")
     parser.add_argument("--no-sandbox", action="store_true",
                         help="run the controller without a sandbox (only for code you trust)")
 
@@ -89,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0.0 < args.startup_timeout <= 3600.0:
         raise ConfigError(f"--startup-timeout: expected 0 to 3600 s, got {args.startup_timeout}")
     options = GradeOptions(args.mode, args.step_on, not args.no_sandbox, args.runs,
-                           args.startup_timeout)
+                           args.startup_timeout, args.ros)
     try:
         if args.submissions is not None:
             if args.controller or args.gradescope is not None:

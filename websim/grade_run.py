@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import os
+import random
 import statistics
 import sys
 import time
@@ -54,6 +55,15 @@ WALL_CLOCK_SCORE_TOLERANCE = 0.05
 Measured: the reference heading PID 0 (its settling time 1.10-1.15 s, within every limit); a
 controller near a limit moves with the host's load, which is why deterministic mode exists."""
 
+ROS_ARGS = ("--ros-args", "-p", "use_sim_time:=true")
+"""``--ros``: appended to the controller's command, so an rclpy node (``rclpy.init()`` reads
+``sys.argv``) runs on the simulator's ``/clock``."""
+
+ROS_DOMAIN_IDS = range(1, 102)
+"""``--ros``: a run's ROS domain is drawn from these (ROS 2's safe range on Linux): in the
+sandbox the graph is the run's network namespace's alone anyway; with ``--no-sandbox`` it
+keeps parallel runs apart (with discovery on this machine only)."""
+
 DETERMINISTIC_WALL_FACTOR = 4.0
 """Deterministic mode: a run may take this many times its duration in wall time (a
 controller answering in 0.2 s each 0.05 s tick), besides its start and missed steps."""
@@ -69,6 +79,8 @@ class GradeOptions:
         sandboxed: in a sandbox (False: ``--no-sandbox``).
         runs: runs per scenario (the score is their median; the spread is reported).
         startup_timeout_s: how long the controller may take to connect (wall time, s).
+        ros: the controller is an rclpy node (``--ros``): the simulator starts the ROS graph,
+            the controller gets ``ROS_DOMAIN_ID`` and ``ROS_ARGS``.
     """
 
     mode: str = "deterministic"
@@ -76,6 +88,15 @@ class GradeOptions:
     sandboxed: bool = True
     runs: int = 1
     startup_timeout_s: float = STARTUP_TIMEOUT_S
+    ros: bool = False
+
+
+def ros_environment(sandboxed: bool) -> dict[str, str]:
+    """``--ros``: the ROS variables the simulator and the controller of one run share."""
+    env = {"ROS_DOMAIN_ID": str(random.SystemRandom().choice(ROS_DOMAIN_IDS))}
+    if not sandboxed:  # the sandbox sets the simulator's discovery (SANDBOXED_SERVER_DDS)
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    return env
 
 
 def grade_submission(suite_file: str | Path, command: Sequence[str], submission: Path,
@@ -157,11 +178,16 @@ def grade_run(suite_path: Path, scenario: Scenario, command: Sequence[str],
                 "--mode", options.mode, "--step-on", options.step_on,
                 "--startup-timeout", repr(options.startup_timeout_s),
                 "--ws-port", str(sandbox.ws_port), "--http-port", str(sandbox.http_port)]
+        ros_env = ros_environment(options.sandboxed) if options.ros else {}
+        if options.ros:
+            argv.append("--ros")
+            command = [*command, *ROS_ARGS]
         try:
-            sandbox.start_server(argv, env=dict(os.environ))
+            sandbox.start_server(argv, env={**os.environ, **ros_env})
         except SimulatorStartError as error:
             return _write(out, _grader_error(scenario, options, f"{error}"))
-        controller = sandbox.run_controller(command, env=controller_environment(scenario))
+        controller = sandbox.run_controller(
+            command, env={**controller_environment(scenario), **ros_env})
         server = sandbox.stop_server()
     wall_s = time.monotonic() - started
     report, trajectory = score_run(

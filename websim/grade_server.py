@@ -3,7 +3,7 @@
 ``websim grade`` starts it (in the submission's sandbox, the controller in its network
 namespace) as ``python -m websim.grade_server SUITE --scenario NAME --out DIR ...``. It is
 ``websim serve`` with one robot, built from the scenario (world, start, mode, payload, seed),
-recording to ``DIR/recording`` (``--record``), with four things of its own:
+recording to ``DIR/recording`` (``--record``), with five things of its own:
 
 - **the scenario's clock**: nothing ticks until the controller subscribes to its trigger
   topic (``/odom``, or what ``--step-on`` names), at most ``STARTUP_TIMEOUT_S``; then the
@@ -14,6 +14,12 @@ recording to ``DIR/recording`` (``--record``), with four things of its own:
   tick at which the controller is due (``LockStep``) the next tick waits for its /cmd_vel,
   so the run depends only on the controller's answers and the seed; in ``wall-clock`` mode
   it runs at 1x and waits for nobody;
+- **the ROS graph** (``--ros``, for an rclpy controller): ``websim serve --ros``'s nodes in
+  this process (``websim.ros_runtime``); the controller's subscription to the trigger topic
+  on the graph starts the run as a rosbridge client's does (``graph_subscribed``: once the
+  robot's publisher has matched it, so the first message reaches it), and its
+  /cmd_vel from the graph answers the lock step as a rosbridge client's does (the robot's
+  tap sees both);
 - **no changes from the controller**: ``/reset_simulation`` is refused; parameters and pause
   need the admin token, which only this process knows (the controller's environment does not
   hold it).
@@ -107,6 +113,12 @@ class RunEnd:
     steps_waited: int
     missed_steps: int
     first_miss_s: float | None
+
+
+GRAPH_TOPICS = ("/odom", "/scan", "/clock")
+"""The trigger topics a controller on the graph may subscribe to (``STEP_ON``); one
+subscribed is, in wall-clock mode, the controller being there (an rclpy node on sim time
+subscribes ``/clock`` at its start)."""
 
 
 class LockStep:
@@ -256,6 +268,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--mode", choices=MODES, default="deterministic")
     parser.add_argument("--step-on", choices=tuple(STEP_ON), default="odom")
     parser.add_argument("--startup-timeout", type=float, default=STARTUP_TIMEOUT_S)
+    parser.add_argument("--ros", action="store_true",
+                        help="start the ROS graph (websim serve --ros): an rclpy controller")
     parser.add_argument("--host", default="127.0.0.1")
     parser.add_argument("--ws-port", type=int, default=9090)
     parser.add_argument("--http-port", type=int, default=8080)
@@ -294,8 +308,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.host, args.http_port, []), args.ws_port, recorder=recorder)
     host = site.front.host  # type: ignore[attr-defined]
     host.bridge.services.add(RESET_SERVICE, "std_srvs/srv/Empty", _refuse_reset)
-    lock_step = LockStep(scenario, robot, clock, host.bridge.topics.subscribed_topics,
-                         lambda: bool(host.bridge.sessions), mode=args.mode,
+
+    def subscribed() -> Collection[str]:
+        return {*host.bridge.topics.subscribed_topics(), *graph_subscribed(site)}
+
+    def connected() -> bool:
+        return bool(host.bridge.sessions) or bool(graph_subscribed(site))
+
+    lock_step = LockStep(scenario, robot, clock, subscribed, connected, mode=args.mode,
                          step_on=args.step_on, out=args.out,
                          startup_timeout_s=args.startup_timeout)
     schedule = site.schedule()
@@ -306,6 +326,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if lock_step.finished is None:
             lock_step.write()
+
+
+def graph_subscribed(site: sites.Site) -> set[str]:
+    """Those of ``GRAPH_TOPICS`` the robot's node (``--ros``) has matched a subscriber for.
+
+    None without ``--ros``, or before the graph has started.
+    """
+    ros = site.ros
+    if ros is None:
+        return set()
+    return {topic for topic in GRAPH_TOPICS if ros.robot_node.subscription_count(topic) > 0}
 
 
 def grade_limits(mode: str) -> ClientLimits:
@@ -334,7 +365,8 @@ def serve_command_arguments(args: argparse.Namespace) -> argparse.Namespace:
     parser = argparse.ArgumentParser()
     serve_command.add_arguments(parser)
     return parser.parse_args(["--host", args.host, "--ws-port", str(args.ws_port),
-                              "--http-port", str(args.http_port), "--log-level", "error"])
+                              "--http-port", str(args.http_port), "--log-level", "error",
+                              *(["--ros"] if args.ros else [])])
 
 
 if __name__ == "__main__":

@@ -294,6 +294,7 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     if args.ros:
         try:
             ros = _start_ros(site, loop)
+            site.ros = ros
         except RuntimeError as error:
             print(f"websim: error: {error}", file=sys.stderr)
             websocket.close()
@@ -369,6 +370,7 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     for task in tasks:
         task.cancel()
     if ros is not None:
+        site.ros = None
         ros.stop()
     websocket.close()
     await websocket.wait_closed()

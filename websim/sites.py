@@ -16,6 +16,7 @@ import socket
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from classroom.class_server import ClassServer, closest_names
 from classroom.registry import (
@@ -54,6 +55,8 @@ class Site:
         headline: what the banner says the server runs (a robot's world and mode; a
             replay's recording), for one robot.
         description: ``robot.json`` of a robot without a simulation here (a replay's).
+        ros: rclpy in the server (``--ros``: ``websim.ros_runtime.RosRuntime`` or
+            ``ClassRosRuntime``) while it runs, else None.
     """
 
     front: WebSocketFront
@@ -65,6 +68,7 @@ class Site:
     recorder: Recorder | None = None
     headline: str = ""
     description: str | None = None
+    ros: Any = None
 
     def close(self) -> None:
         """Close the recordings, save a class's state and release its file (at shutdown)."""
