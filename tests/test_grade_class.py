@@ -15,7 +15,7 @@ import pytest
 
 from physics import ConfigError
 from websim import cli
-from websim.grade_class import SUBMISSION_FILE, submission_command
+from websim.grade_class import SUBMISSION_FILE, submission_command, submission_declaration
 
 ROOT = Path(__file__).resolve().parent.parent
 SOLUTION = ROOT / "examples" / "solutions" / "heading_pid.py"
@@ -69,6 +69,11 @@ def test_a_submission_file_is_checked(tmp_path: Path) -> None:
     assert submission_command(tmp_path) == ["python3", "a.py"]
     (tmp_path / SUBMISSION_FILE).write_text("comand: python3 a.py\n")
     with pytest.raises(ConfigError, match=r"expected only .command: \.\.\.."):
+        submission_command(tmp_path)
+    (tmp_path / SUBMISSION_FILE).write_text("command: python3 a.py\nros: true\n")
+    assert submission_declaration(tmp_path) == (["python3", "a.py"], True)
+    (tmp_path / SUBMISSION_FILE).write_text("command: python3 a.py\nros: yes please\n")
+    with pytest.raises(ConfigError, match="ros: expected true or false"):
         submission_command(tmp_path)
     (tmp_path / SUBMISSION_FILE).write_text("command: 'python3 \"a.py'\n")
     with pytest.raises(ConfigError, match="command: No closing quotation"):

@@ -89,14 +89,17 @@ def test_an_rclpy_node_that_does_not_answer_is_stopped_with_the_reason(
     assert 1 <= int(domain) <= 101
 
 
-def test_wall_clock_mode_grades_an_rclpy_node_too(tmp_path: Path) -> None:
-    """At 1x the run starts once the node is on the graph (its /clock or /odom)."""
+def test_wall_clock_mode_grades_a_node_its_submission_declares_rclpy(tmp_path: Path) -> None:
+    """``ros: true`` in websim-submission.yaml is --ros; at 1x the run starts once the node
+    is on the graph (its /clock or /odom)."""
     folder = tmp_path / "bob"
     folder.mkdir()
     shutil.copy(SOLUTIONS / "heading_pid_rclpy.py", folder)
+    (folder / "websim-submission.yaml").write_text(
+        "command: python3 heading_pid_rclpy.py\nros: true\n")
     out = tmp_path / "out"
-    assert grade(folder, out, "python3", "heading_pid_rclpy.py",
-                 options=("--mode", "wall-clock")) == 0
+    assert cli.main(["grade", "heading_pid", "--submission", str(folder), "--out", str(out),
+                     "--mode", "wall-clock"]) == 0
     graded = report(out)
     assert graded["passed"] is True, graded["reason"]
     assert graded["run"]["mode"] == "wall-clock" and graded["run"]["ended_by"] == "duration"

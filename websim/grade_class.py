@@ -4,6 +4,7 @@ Every folder of DIR is a student's submission, named after the student, declarin
 command in ``websim-submission.yaml``::
 
     command: python3 wall_follower.py          # or a list: [python3, wall_follower.py]
+    ros: true                                  # optional: an rclpy node (websim grade --ros)
 
 Submissions are graded in parallel (up to the machine's cores, ``--jobs``), each as
 ``websim grade`` grades one (its own sandbox and simulator per run), into ``OUT/STUDENT/``.
@@ -16,6 +17,7 @@ student's reports).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import html
 import json
 import os
@@ -23,7 +25,7 @@ import shlex
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import yaml
 
@@ -32,9 +34,21 @@ from physics import ConfigError
 from websim.grade_run import GradeOptions, grade_submission
 
 SUBMISSION_FILE = "websim-submission.yaml"
-SUBMISSION_KEYS = ("command",)
+SUBMISSION_KEYS = ("command", "ros")
 MAX_COMMAND_ARGS = 64
 MAX_SUBMISSION_FILE_BYTES = 64 * 1024
+
+
+class Declared(NamedTuple):
+    """What a submission's ``websim-submission.yaml`` declares.
+
+    Attributes:
+        command: the controller's command line, as words.
+        ros: ``ros: true``: the controller is an rclpy node, graded as with ``--ros``.
+    """
+
+    command: list[str]
+    ros: bool
 
 
 def submission_command(folder: Path) -> list[str]:
@@ -42,6 +56,16 @@ def submission_command(folder: Path) -> list[str]:
 
     Raises:
         ConfigError: the file is missing or not ``command: ...`` (the message says which).
+    """
+    return submission_declaration(folder).command
+
+
+def submission_declaration(folder: Path) -> Declared:
+    """The command (and ``ros``) a submission declares in its ``websim-submission.yaml``.
+
+    Raises:
+        ConfigError: the file is missing or not ``command: ...`` with an optional
+            ``ros: true|false`` (the message says which).
     """
     path = folder / SUBMISSION_FILE
     if not path.is_file():
@@ -54,7 +78,11 @@ def submission_command(folder: Path) -> list[str]:
     except (yaml.YAMLError, UnicodeDecodeError) as error:
         raise ConfigError(f"{path.name}: not YAML: {error}") from None
     if not isinstance(document, dict) or set(document) - set(SUBMISSION_KEYS):
-        raise ConfigError(f"{path.name}: expected only 'command: ...', got {document!r:.80}")
+        raise ConfigError(f"{path.name}: expected only 'command: ...' (and 'ros: true' for an "
+                          f"rclpy node), got {document!r:.80}")
+    ros = document.get("ros", False)
+    if not isinstance(ros, bool):
+        raise ConfigError(f"{path.name}: ros: expected true or false, got {ros!r:.40}")
     command = document.get("command")
     if isinstance(command, str):
         try:
@@ -65,7 +93,7 @@ def submission_command(folder: Path) -> list[str]:
             or not all(isinstance(arg, str) and arg for arg in command)):
         raise ConfigError(f"{path.name}: command: expected a command line or a list of "
                           f"words, got {command!r:.80}")
-    return command
+    return Declared(command, ros)
 
 
 def grade_class(suite_file: str | Path, suite: Suite, submissions: Path, out: Path,
@@ -81,11 +109,12 @@ def grade_class(suite_file: str | Path, suite: Suite, submissions: Path, out: Pa
     def one(folder: Path) -> dict[str, Any]:
         target = out / folder.name
         try:
-            command = submission_command(folder)
+            command, ros = submission_declaration(folder)
         except ConfigError as error:
             return _zero_row(folder.name, suite, str(error))
+        graded = dataclasses.replace(options, ros=options.ros or ros)
         try:
-            summary = grade_submission(suite_file, command, folder, target, options, quiet=True)
+            summary = grade_submission(suite_file, command, folder, target, graded, quiet=True)
         except Exception as error:  # a grader fault for one student must not stop the class
             return _zero_row(folder.name, suite, f"the grader failed: {error}")
         failing = [row for row in summary["scenarios"] if not row["passed"]]
@@ -234,4 +263,4 @@ def write_gradescope(path: Path, results: dict[str, Any]) -> None:
 
 
 __all__ = ["SUBMISSION_FILE", "grade_class", "gradescope_refusal", "gradescope_results",
-           "submission_command", "write_gradescope"]
+           "submission_command", "submission_declaration", "write_gradescope"]

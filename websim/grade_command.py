@@ -10,6 +10,7 @@ ran, whatever their scores, 2 for bad input.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 from grading import load_suite
@@ -19,7 +20,7 @@ from websim.grade_class import (
     grade_class,
     gradescope_refusal,
     gradescope_results,
-    submission_command,
+    submission_declaration,
     write_gradescope,
 )
 from websim.grade_run import GradeOptions, grade_submission
@@ -117,7 +118,8 @@ def run(args: argparse.Namespace) -> int:
                                   "heading_pid.yaml -- python3 controller.py (or declare it "
                                   f"in the submission's {SUBMISSION_FILE})")
             try:
-                command = submission_command(args.submission)
+                command, ros = submission_declaration(args.submission)
+                options = dataclasses.replace(options, ros=options.ros or ros)
             except ConfigError as error:
                 if args.gradescope is None:
                     raise
