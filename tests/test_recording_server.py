@@ -182,21 +182,6 @@ def test_a_class_records_one_bag_per_robot_and_ctrl_c_closes_them(tmp_path: Path
     assert bag_info(only_bag(bags, "robot02"))["custom_data"]["robot"] == "robot02"
 
 
-@pytest.fixture
-def tiny_disk(tmp_path: Path) -> Iterator[Path]:
-    """A 16 KiB tmpfs: a disk that fills up (mounting one needs root)."""
-    mount = tmp_path / "tiny"
-    mount.mkdir()
-    result = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=16k", "tmpfs", str(mount)],
-                            capture_output=True, text=True, check=False)
-    if result.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs (needs root): {result.stderr.strip()}")
-    try:
-        yield mount
-    finally:
-        subprocess.run(["umount", "-l", str(mount)], check=False)
-
-
 def test_a_full_disk_stops_the_recording_with_one_line_and_the_robot_goes_on(
         tiny_disk: Path) -> None:
     server = start_server(["--world", "maze", "--record", str(tiny_disk)])
