@@ -52,7 +52,7 @@ from grading.metrics.wall_following import MIT_END_RADIUS_M
 from physics.params import RobotParams
 from physics.pid import CONTROL_PERIOD_S
 from physics.robot import MODES
-from physics.shipped import shipped
+from physics.shipped import by_name, shipped
 from physics.simulation import TICK_PERIOD_S
 from physics.snapshots import Pose2D
 from physics.validation import (
@@ -273,10 +273,7 @@ class Suite:
 
 def resolve_scenario_path(name_or_path: str | Path) -> Path:
     """The file for a path, or for the name of a shipped scenario (``"heading_pid"``)."""
-    path = Path(name_or_path)
-    if path.exists() or path.suffix or len(path.parts) > 1:
-        return path
-    return SCENARIOS_DIR / f"{path}.yaml"
+    return by_name(name_or_path, SCENARIOS_DIR)
 
 
 def load_scenario(path: str | Path) -> Scenario:

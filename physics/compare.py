@@ -34,7 +34,7 @@ import yaml
 
 from physics.params import LidarParams, NoiseParams, RobotParams
 from physics.pid import CONTROL_PERIOD_S, HeadingPid, PidGains, wrap_angle
-from physics.shipped import shipped
+from physics.shipped import by_name, shipped
 from physics.simulation import Simulation
 from physics.validation import (
     ConfigError,
@@ -140,10 +140,7 @@ class Comparison:
 
 def resolve_commands_path(path: str | Path) -> Path:
     """``path`` itself, or for a bare name (``"step"``) the shipped command file of that name."""
-    path = Path(path)
-    if path.exists() or path.suffix or len(path.parts) > 1:
-        return path
-    return COMMANDS_DIR / f"{path}.yaml"
+    return by_name(path, COMMANDS_DIR)
 
 
 def load_commands(path: str | Path) -> tuple[Segment, ...]:

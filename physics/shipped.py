@@ -32,3 +32,14 @@ def shipped(package: str, name: str) -> Path:
     if FROM_CHECKOUT:
         return CHECKOUT_DIR / name
     return Path(str(importlib.resources.files(package) / SHARE / name))
+
+
+def by_name(name_or_path: str | Path, folder: Path) -> Path:
+    """The file for a path, or for a shipped file's name in ``folder`` (``"maze"``).
+
+    A name has no suffix and no folder, and no such file exists here: ``folder/NAME.yaml``.
+    """
+    path = Path(name_or_path)
+    if path.exists() or path.suffix or len(path.parts) > 1:
+        return path
+    return folder / f"{path}.yaml"

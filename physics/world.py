@@ -39,7 +39,7 @@ from physics.map_grid import (
     grid_over,
 )
 from physics.params import NoiseParams
-from physics.shipped import shipped
+from physics.shipped import by_name, shipped
 from physics.snapshots import Pose2D
 from physics.validation import (
     ConfigError,
@@ -176,10 +176,7 @@ class World:
 
 def resolve_world_path(name_or_path: str | Path) -> Path:
     """Return the file for a path, or for the name of a shipped world (``"maze"``)."""
-    path = Path(name_or_path)
-    if path.exists() or path.suffix or len(path.parts) > 1:
-        return path
-    return WORLDS_DIR / f"{path}.yaml"
+    return by_name(name_or_path, WORLDS_DIR)
 
 
 def load_world(path: str | Path) -> World:
