@@ -77,10 +77,15 @@ def shipped_commands() -> list[str]:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``websim compare`` (besides world, params and seed)."""
-    parser.add_argument("--commands", required=True,
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--commands",
                         help="command file: a YAML list (or CSV) of segments with duration_s, "
                              "linear_mps, angular_rps and optional mass_kg, inertia_kg_m2; "
                              "or a shipped one by name: " + ", ".join(shipped_commands()))
+    source.add_argument("--real", metavar="RECORDING",
+                        help="a real robot's recording (rosbag2 folder, .db3, .mcap, ROS 1 "
+                             ".bag, or CSV): replay its commands through both models and "
+                             "measure the gap (docs/validation.md); also writes report.html")
     parser.add_argument("--out", required=True, type=Path,
                         help="directory for trajectory.csv, summary.json, comparison.png")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
