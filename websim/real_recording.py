@@ -136,7 +136,8 @@ def _read_bag(path: Path, topics: Topics, stamps: str) -> tuple[Timed, Timed, di
         reader.open()
     except (AnyReaderError, OSError, sqlite3.Error, struct.error, ValueError, KeyError,
             IndexError, EOFError) as error:
-        raise ConfigError(f"{path}: cannot read this recording ({_damaged(error)})") from None
+        raise ConfigError(f"{path}: cannot read this recording: damaged, truncated or not a "
+                          f"bag ({_damaged(error)})") from None
     try:
         available = {c.topic: (c.msgtype, 0) for c in reader.connections}
         for connection in reader.connections:
