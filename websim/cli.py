@@ -100,7 +100,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Estimate the robot driver's command lag, linear and angular scale and "
                     "acceleration limits from a real robot's recording (fitted on its first "
                     "part, checked on the rest) and write a parameter file for websim serve "
-                    "--params and compare (docs/validation.md).")
+                    "--params, compare and grade (docs/validation.md).")
     fit_command.add_arguments(fit)
     compare_real.add_recording_arguments(fit)
     fit.set_defaults(run=fit_command.run)

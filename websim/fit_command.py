@@ -4,9 +4,9 @@ Reads the recording as ``websim compare --real`` does (``websim.compare_real``'s
 fits the command lag, the linear and angular scales and the acceleration limits on its first
 part (``physics.command_fit``), checks them on the rest (the held-out part: speed errors and
 the kinematic model's pose error there, before and after), flags implausible values with
-their likely causes, and writes a parameter file (``--out``) that ``websim serve --params``
-and ``websim compare --params`` take: the base parameters (``--params``) with the fitted
-driver.
+their likely causes, and writes a parameter file (``--out``) that ``websim serve --params``,
+``websim compare --params`` and ``websim grade --params`` take: the base parameters
+(``--params``) with the fitted driver.
 """
 
 from __future__ import annotations
