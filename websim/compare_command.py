@@ -14,7 +14,7 @@ import dataclasses
 import json
 import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import IO, Any
 
@@ -226,22 +226,28 @@ def progress_bar(total: int, stream: IO[str], delay_s: float = PROGRESS_DELAY_S)
 
 def write_trajectory(result: Comparison, path: Path) -> Path:
     """Write every row, ground truth and odometry, one per tick and mode."""
-    with _opened(path) as stream:
+    return write_table(path, TRAJECTORY_COLUMNS, result.rows)
+
+
+def write_table(path: Path, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> Path:
+    """Write a CSV file: a header of ``columns``, then ``rows``."""
+    with opened(path) as stream:
         writer = csv.writer(stream, lineterminator="\n")
-        writer.writerow(TRAJECTORY_COLUMNS)
-        writer.writerows(result.rows)
+        writer.writerow(columns)
+        writer.writerows(rows)
     return path
 
 
 def write_summary(result: Comparison, path: Path) -> Path:
     """Write ``result.summary`` as indented JSON."""
-    with _opened(path) as stream:
+    with opened(path) as stream:
         json.dump(result.summary, stream, indent=2)
         stream.write("\n")
     return path
 
 
-def _opened(path: Path) -> IO[str]:
+def opened(path: Path) -> IO[str]:
+    """``path`` opened for writing text; a ConfigError naming it if it cannot be."""
     try:
         return path.open("w", encoding="utf-8", newline="")
     except OSError as error:

@@ -14,18 +14,23 @@ shared with ``websim fit`` (``add_recording_arguments``, ``grid_from``).
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import sys
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 from physics import ConfigError, load_params
 from physics.real_comparison import MODELS, REAL_COLUMNS, RealComparison, compare_real
 from physics.recorded_run import GridRun, on_grid
 from ros_nodes.parameters import CMD_VEL_TIMEOUT_OFF_S
-from websim.compare_command import FIGURE_DPI, plots_hint, robot_with_overrides
+from websim.compare_command import (
+    FIGURE_DPI,
+    opened,
+    plots_hint,
+    robot_with_overrides,
+    write_table,
+)
 from websim.real_recording import STAMPS, Recording, Topics, read_recording
 from websim.validation_report import comparison_page
 
@@ -154,25 +159,14 @@ def summary_table(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _opened(path: Path) -> IO[str]:
-    try:
-        return path.open("w", encoding="utf-8", newline="")
-    except OSError as error:
-        raise ConfigError(f"{path}: cannot write: {error.strerror}") from None
-
-
 def write_rows(result: RealComparison, path: Path) -> Path:
     """``trajectory.csv``: one row per tick (``REAL_COLUMNS``)."""
-    with _opened(path) as stream:
-        writer = csv.writer(stream, lineterminator="\n")
-        writer.writerow(REAL_COLUMNS)
-        writer.writerows(result.rows)
-    return path
+    return write_table(path, REAL_COLUMNS, result.rows)
 
 
 def write_json(summary: dict[str, Any], path: Path) -> Path:
     """``summary.json``, indented; NaN (a measure with nothing to measure) as null."""
-    with _opened(path) as stream:
+    with opened(path) as stream:
         json.dump(_finite(summary), stream, indent=2)
         stream.write("\n")
     return path
@@ -190,7 +184,7 @@ def _finite(value: Any) -> Any:
 
 def write_text(text: str, path: Path) -> Path:
     """Write ``text`` (the report page) to ``path``."""
-    with _opened(path) as stream:
+    with opened(path) as stream:
         stream.write(text)
     return path
 
