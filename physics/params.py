@@ -97,6 +97,14 @@ class RobotParams:
         max_angular_rps: angular velocity limit; commands are clamped to it (rad/s).
         max_wheel_force_n: traction force limit per wheel in dynamic mode (N).
         footprint_radius_m: radius of the circular collision footprint (m).
+        cmd_lag_s: dead time of the motor driver: a command acts this long after it arrives
+            (s); 0: at once (``physics.command_pipeline``, as every field below).
+        linear_scale: forward speed the driver gives per commanded m/s (1: as commanded; a
+            wrong wheel radius in the driver, a motor's gain).
+        angular_scale: yaw rate the driver gives per commanded rad/s (1: as commanded; a
+            wrong wheelbase in the driver, wheel slip in turns).
+        linear_accel_limit_mps2: the driver's ramp on the forward speed (m/s^2); 0: none.
+        angular_accel_limit_rps2: the driver's ramp on the yaw rate (rad/s^2); 0: none.
     """
 
     mass_kg: float = _shipped("robot", "mass_kg", 0.01, 1000.0, "kg")
@@ -107,6 +115,13 @@ class RobotParams:
     max_angular_rps: float = _shipped("robot", "max_angular_rps", 0.01, 20.0, "rad/s")
     max_wheel_force_n: float = _shipped("robot", "max_wheel_force_n", 0.001, 1e6, "N")
     footprint_radius_m: float = _shipped("robot", "footprint_radius_m", 0.01, 5.0, "m")
+    cmd_lag_s: float = _shipped("robot", "cmd_lag_s", 0.0, 2.0, "s")
+    linear_scale: float = _shipped("robot", "linear_scale", 0.05, 5.0, "")
+    angular_scale: float = _shipped("robot", "angular_scale", 0.05, 5.0, "")
+    linear_accel_limit_mps2: float = _shipped("robot", "linear_accel_limit_mps2", 0.0, 1000.0,
+                                              "m/s^2")
+    angular_accel_limit_rps2: float = _shipped("robot", "angular_accel_limit_rps2", 0.0,
+                                               1000.0, "rad/s^2")
 
     def __post_init__(self) -> None:
         _check_ranges(self)

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from physics.command_pipeline import AT_REST, drive
 from physics.frames import map_to_odom
 from physics.kinematics import clamp_command
 from physics.lidar import Lidar, ScanRequest, scan_many
@@ -72,6 +73,7 @@ class Simulation:
         self._seed = seed
         self._seed_noise(seed)
         self._command = Command(0.0, 0.0)
+        self._drive = AT_REST
         self._tick = 0
         self._scan_cache: tuple[int, LaserScan] | None = None
 
@@ -145,9 +147,16 @@ class Simulation:
         return self._command
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` ticks of ``dt_s`` each."""
+        """Advance ``n`` ticks of ``dt_s`` each.
+
+        The command in force reaches the wheels through the robot's driver
+        (``physics.command_pipeline.drive``: its lag, scales and ramps; the shipped robot's
+        passes it through unchanged).
+        """
         for _ in range(n):
-            samples = self._robot.step(self._command, self._dt_s)
+            self._drive, wheels = drive(self._drive, self._command, self._robot.params,
+                                        self._dt_s)
+            samples = self._robot.step(wheels, self._dt_s)
             v_noise = self._draw_noise(self._noise.odom_linear_sigma_mps)
             omega_noise = self._draw_noise(self._noise.odom_angular_sigma_rps)
             self._odometry.integrate(samples, v_noise, omega_noise)
@@ -273,6 +282,7 @@ class Simulation:
         self._odometry.place(odometry)
         self._wheels.reset()
         self._command = Command(0.0, 0.0)
+        self._drive = AT_REST
         self._scan_cache = None
 
     def reset(self, *, seed: int | None = None) -> None:
@@ -289,6 +299,7 @@ class Simulation:
         self._odometry.reset()
         self._wheels.reset()
         self._command = Command(0.0, 0.0)
+        self._drive = AT_REST
         self._tick = 0
         self._scan_cache = None
 

@@ -25,7 +25,7 @@ from rosbridge.core.clock import (
     SimClock,
     WallClock,
 )
-from websim import compare_command, grade_command, map_command, sites
+from websim import compare_command, compare_real, fit_command, grade_command, map_command, sites
 from websim import replay as replay_command
 from websim import serve as serve_command
 
@@ -83,12 +83,27 @@ def build_parser() -> argparse.ArgumentParser:
     replay.set_defaults(run=_run_replay)
 
     compare = commands.add_parser(
-        "compare", help="run a command file in kinematic and dynamic mode and compare them",
+        "compare", help="run a command file (or a real robot's recorded commands, --real) in "
+                        "kinematic and dynamic mode and compare them",
         description="Drive a command file headless through both motion models with the same "
-                    "seed; write trajectory.csv, summary.json and comparison.png to --out.")
+                    "seed; write trajectory.csv, summary.json and comparison.png to --out. "
+                    "With --real RECORDING, replay a real robot's recorded commands and "
+                    "measure both models against its trajectory (docs/validation.md).")
     _add_sim_arguments(compare, mode=False)
     compare_command.add_arguments(compare)
-    compare.set_defaults(run=compare_command.run)
+    compare_real.add_recording_arguments(compare)
+    compare.set_defaults(run=_run_compare)
+
+    fit = commands.add_parser(
+        "fit", help="fit the robot's lag, speed scales and acceleration limits to a real "
+                    "robot's recording; write a parameter file",
+        description="Estimate the robot driver's command lag, linear and angular scale and "
+                    "acceleration limits from a real robot's recording (fitted on its first "
+                    "part, checked on the rest) and write a parameter file for websim serve "
+                    "--params, compare and grade (docs/validation.md).")
+    fit_command.add_arguments(fit)
+    compare_real.add_recording_arguments(fit)
+    fit.set_defaults(run=fit_command.run)
 
     proxy = commands.add_parser(
         "nginx-config", help="print an nginx.conf routing a class's robots to its workers "
@@ -206,6 +221,18 @@ def _run_demo(args: argparse.Namespace) -> int:
             print(f"{sim.time_s:6.2f}  {odom.x:8.4f}  {odom.y:8.4f}  {odom.theta:14.4f}  "
                   f"{odom.v:6.3f}  {odom.omega:9.3f}", flush=True)
     return 0
+
+
+def _run_compare(args: argparse.Namespace) -> int:
+    if args.real is None:
+        return compare_command.run(args)
+    given = [flag for flag, value in (("--world", args.world != DEFAULT_WORLD),
+                                      ("--controller", args.controller is not None))
+             if value]
+    if given:
+        raise ConfigError(f"{given[0]} is for --commands: --real replays the recording's own "
+                          "commands on an open floor")
+    return compare_real.run(args)
 
 
 def _run_token(args: argparse.Namespace) -> int:

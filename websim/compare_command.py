@@ -14,7 +14,7 @@ import dataclasses
 import json
 import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import IO, Any
 
@@ -77,10 +77,15 @@ def shipped_commands() -> list[str]:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``websim compare`` (besides world, params and seed)."""
-    parser.add_argument("--commands", required=True,
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--commands",
                         help="command file: a YAML list (or CSV) of segments with duration_s, "
                              "linear_mps, angular_rps and optional mass_kg, inertia_kg_m2; "
                              "or a shipped one by name: " + ", ".join(shipped_commands()))
+    source.add_argument("--real", metavar="RECORDING",
+                        help="a real robot's recording (rosbag2 folder, .db3, .mcap, ROS 1 "
+                             ".bag, or CSV): replay its commands through both models and "
+                             "measure the gap (docs/validation.md); also writes report.html")
     parser.add_argument("--out", required=True, type=Path,
                         help="directory for trajectory.csv, summary.json, comparison.png")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
@@ -221,22 +226,28 @@ def progress_bar(total: int, stream: IO[str], delay_s: float = PROGRESS_DELAY_S)
 
 def write_trajectory(result: Comparison, path: Path) -> Path:
     """Write every row, ground truth and odometry, one per tick and mode."""
-    with _opened(path) as stream:
+    return write_table(path, TRAJECTORY_COLUMNS, result.rows)
+
+
+def write_table(path: Path, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> Path:
+    """Write a CSV file: a header of ``columns``, then ``rows``."""
+    with opened(path) as stream:
         writer = csv.writer(stream, lineterminator="\n")
-        writer.writerow(TRAJECTORY_COLUMNS)
-        writer.writerows(result.rows)
+        writer.writerow(columns)
+        writer.writerows(rows)
     return path
 
 
 def write_summary(result: Comparison, path: Path) -> Path:
     """Write ``result.summary`` as indented JSON."""
-    with _opened(path) as stream:
+    with opened(path) as stream:
         json.dump(result.summary, stream, indent=2)
         stream.write("\n")
     return path
 
 
-def _opened(path: Path) -> IO[str]:
+def opened(path: Path) -> IO[str]:
+    """``path`` opened for writing text; a ConfigError naming it if it cannot be."""
     try:
         return path.open("w", encoding="utf-8", newline="")
     except OSError as error:

@@ -14,7 +14,7 @@ import dataclasses
 from pathlib import Path
 
 from grading import load_suite
-from physics import ConfigError
+from physics import ConfigError, load_params
 from websim.grade_class import (
     SUBMISSION_FILE,
     grade_class,
@@ -74,6 +74,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the controller is an rclpy node: the simulator starts the ROS "
                              "graph, the controller gets a ROS_DOMAIN_ID of its run and "
                              "--ros-args -p use_sim_time:=true after its command")
+    parser.add_argument("--params", default=None, metavar="FILE",
+                        help="grade on the robot of this parameter file (e.g. websim fit's: "
+                             "the real robot's lag, scales and ramps); a scenario's payload is "
+                             "kept (default: the shipped robot)")
     parser.add_argument("--no-sandbox", action="store_true",
                         help="run the controller without a sandbox (only for code you trust)")
 
@@ -93,8 +97,10 @@ def run(args: argparse.Namespace) -> int:
     suite = load_suite(args.suite)
     if not 0.0 < args.startup_timeout <= 3600.0:
         raise ConfigError(f"--startup-timeout: expected 0 to 3600 s, got {args.startup_timeout}")
+    if args.params is not None:
+        load_params(args.params)  # a bad file is refused before any run
     options = GradeOptions(args.mode, args.step_on, not args.no_sandbox, args.runs,
-                           args.startup_timeout, args.ros)
+                           args.startup_timeout, args.ros, args.params)
     try:
         if args.submissions is not None:
             if args.controller or args.gradescope is not None:

@@ -41,6 +41,7 @@ from websim.grade_server import (
     RUN_FILE,
     STARTUP_TIMEOUT_S,
     STEP_TIMEOUT_S,
+    on_robot,
 )
 from websim.sandbox import SandboxLimits, SimulatorStartError, SubmissionSandbox
 
@@ -81,6 +82,8 @@ class GradeOptions:
         startup_timeout_s: how long the controller may take to connect (wall time, s).
         ros: the controller is an rclpy node (``--ros``): the simulator starts the ROS graph,
             the controller gets ``ROS_DOMAIN_ID`` and ``ROS_ARGS``.
+        params: a parameter file whose robot the runs use (``--params``, e.g. ``websim
+            fit``'s); None: each scenario's own.
     """
 
     mode: str = "deterministic"
@@ -89,6 +92,7 @@ class GradeOptions:
     runs: int = 1
     startup_timeout_s: float = STARTUP_TIMEOUT_S
     ros: bool = False
+    params: str | None = None
 
 
 def ros_environment(sandboxed: bool) -> dict[str, str]:
@@ -117,8 +121,8 @@ def grade_submission(suite_file: str | Path, command: Sequence[str], submission:
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     for entry in suite.entries:
-        report = grade_scenario(suite_path, entry.scenario, command, submission,
-                                out / entry.scenario.name, options)
+        report = grade_scenario(suite_path, on_robot(entry.scenario, options.params), command,
+                                submission, out / entry.scenario.name, options)
         if not quiet:
             print(summary_line(report), flush=True)
         rows.append({"name": entry.scenario.name, "weight": entry.weight,
@@ -178,6 +182,8 @@ def grade_run(suite_path: Path, scenario: Scenario, command: Sequence[str],
                 "--mode", options.mode, "--step-on", options.step_on,
                 "--startup-timeout", repr(options.startup_timeout_s),
                 "--ws-port", str(sandbox.ws_port), "--http-port", str(sandbox.http_port)]
+        if options.params is not None:
+            argv += ["--params", str(Path(options.params).resolve())]
         ros_env = ros_environment(options.sandboxed) if options.ros else {}
         if options.ros:
             argv.append("--ros")

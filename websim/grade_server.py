@@ -44,7 +44,7 @@ from typing import Any
 
 from classroom.registry import strong_token
 from grading import Scenario, load_suite
-from physics import TICK_PERIOD_S, ConfigError, Simulation
+from physics import TICK_PERIOD_S, ConfigError, RobotParams, Simulation, load_params
 from physics.params import NoiseParams
 from ros_nodes.recording import Recorder
 from ros_nodes.robot_interface import RESET_SERVICE
@@ -268,12 +268,34 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--mode", choices=MODES, default="deterministic")
     parser.add_argument("--step-on", choices=tuple(STEP_ON), default="odom")
     parser.add_argument("--startup-timeout", type=float, default=STARTUP_TIMEOUT_S)
+    parser.add_argument("--params", default=None,
+                        help="grade on the robot of this parameter file (websim fit's)")
     parser.add_argument("--ros", action="store_true",
                         help="start the ROS graph (websim serve --ros): an rclpy controller")
     parser.add_argument("--host", default="127.0.0.1")
     parser.add_argument("--ws-port", type=int, default=9090)
     parser.add_argument("--http-port", type=int, default=8080)
     return parser
+
+
+def on_robot(scenario: Scenario, params_file: str | None) -> Scenario:
+    """``scenario`` graded on the robot of a parameter file (``--params``; None: its own).
+
+    The file's robot section replaces the shipped robot; a payload the scenario sets (its
+    mass and inertia differ from the shipped robot's) is kept.
+
+    Raises:
+        ConfigError: the file is not a valid parameter file.
+    """
+    if params_file is None:
+        return scenario
+    robot = load_params(params_file).robot
+    shipped = RobotParams()
+    if (scenario.robot.mass_kg, scenario.robot.inertia_kg_m2) != \
+            (shipped.mass_kg, shipped.inertia_kg_m2):
+        robot = dataclasses.replace(robot, mass_kg=scenario.robot.mass_kg,
+                                    inertia_kg_m2=scenario.robot.inertia_kg_m2)
+    return dataclasses.replace(scenario, robot=robot)
 
 
 def pick_scenario(suite_file: str, name: str | None) -> Scenario:
@@ -290,7 +312,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run one graded run's simulator until the run ends; 0 when it ran."""
     args = build_parser().parse_args(argv)
     try:
-        scenario = pick_scenario(args.suite, args.scenario)
+        scenario = on_robot(pick_scenario(args.suite, args.scenario), args.params)
     except ConfigError as error:
         print(f"websim grade server: error: {error}", file=sys.stderr)
         return 2
