@@ -32,6 +32,8 @@ from ros_nodes.robot_description import robot_json
 from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
 from ros_nodes.robot_interface import ROBOTS_PREFIX
 from ros_nodes.robot_server import SimServer
+from ros_nodes.simulation_services import add_simulation_services
+from ros_nodes.simulator_control import OneRobotWorld
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.clock import Clock
 from rosbridge.core.limits import ClientLimits, LatchedBytes, OriginPolicy
@@ -154,6 +156,7 @@ def single_robot(robot: VirtualRobot, token: str, limits: ClientLimits,
         recorder: records the robot (``--record``); None: nothing is recorded.
     """
     server = SimServer(robot, token, limits=limits, origins=origins)
+    add_simulation_services(server.bridge, OneRobotWorld(server.host, SINGLE_ROBOT_NAME))
     site = Site(server, robot=robot, ws_port=ws_port, recorder=recorder,
                 headline=f"world '{robot.sim.world.name}', {robot.sim.mode} mode")
     if recorder is not None:
@@ -202,7 +205,7 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
                               max_robots=args.max_robots, idle_pause_s=args.idle_pause,
                               lazy=args.worker, clock=clock, state=state,
                               latched=LatchedBytes.for_server(limits),
-                              recorder=recorder)
+                              recorder=recorder, on_robot=simulated)
     except BaseException:
         state.close()
         raise
@@ -235,6 +238,14 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
                            f"{_url_name(host)} (--public-host: the name or address students "
                            "reach)")
     return site
+
+
+def simulated(name: str, host: RobotHost) -> None:
+    """A class robot's world of its own, with the simulation services over it.
+
+    ``simulation_interfaces`` and turtlesim's names (``ros_nodes.simulation_services``).
+    """
+    add_simulation_services(host.bridge, OneRobotWorld(host, name))
 
 
 def public_host(bind: str) -> str:
