@@ -306,8 +306,10 @@ def _name_filter(pattern: str) -> Callable[[str], bool]:
     try:
         compiled = re2.compile(pattern, options)
     except re2.error as error:
+        why = error.args[0].decode(errors="replace") if error.args and \
+            isinstance(error.args[0], bytes) else str(error)
         raise ResultError(OPERATION_FAILED, f"filter: not a POSIX extended regular expression: "
-                                        f"{error}") from None
+                                            f"{why}") from None
     return lambda name: compiled.search(name) is not None
 
 
@@ -515,7 +517,8 @@ class SimulationServices:
         try:
             self.control.teleport(name, pose)
         except ConfigError as error:
-            raise ResultError(code, str(error)) from None
+            raise ResultError(code, f"'{name}' cannot be put at ({pose.x:g}, {pose.y:g}): "
+                                    f"{error}") from None
 
     # -- spawning ----------------------------------------------------------------------------
 
