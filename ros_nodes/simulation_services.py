@@ -780,7 +780,7 @@ class SimulationServices:
     def turtlesim_kill(self, args: Any, caller: Caller) -> dict[str, Any]:
         """``/kill`` (name): DeleteEntity."""
         fields = request("turtlesim/srv/Kill", args)
-        _check(self.delete_entity({"entity": fields["name"]}, caller), "/kill")
+        _check(self.call("DeleteEntity", {"entity": fields["name"]}, caller), "/kill")
         return {}
 
     def turtlesim_reset(self, args: Any, caller: Caller) -> dict[str, Any]:
@@ -836,7 +836,8 @@ def _or_fail(service: str, action: Callable[[], Any]) -> Any:
         raise ServiceError(f"{service}: {refusal}") from None
 
 
-def _check(response: Mapping[str, Any], service: str) -> None:
+def _check(response: Mapping[str, Any] | Later, service: str) -> None:
+    assert not isinstance(response, Later)  # only StepSimulation answers later
     outcome = response["result"]
     if outcome["result"] != OK:
         raise ServiceError(f"{service}: {outcome['error_message']}")
