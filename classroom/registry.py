@@ -206,6 +206,8 @@ class Classroom:
         latched: the server's pool of clients' latched messages, each robot's within it
             (default: one of the default sizes).
         recorder: records every robot from its creation on (``--record``); None: none.
+        on_robot: called with (name, host) of each robot once it is made (``websim serve``
+            adds its simulation services: ``ros_nodes.simulation_services``).
     """
 
     def __init__(self, roster: list[Student], make_robot: Callable[[Student], VirtualRobot],
@@ -215,8 +217,10 @@ class Classroom:
                  make_token: Callable[[str], str] | None = None, lazy: bool = False,
                  clock: Clock | None = None, state: ClassState | None = None,
                  latched: LatchedBytes | None = None,
-                 recorder: Recorder | None = None) -> None:
+                 recorder: Recorder | None = None,
+                 on_robot: Callable[[str, RobotHost], Any] | None = None) -> None:
         self._recorder = recorder
+        self._on_robot = on_robot
         self.clock: Clock = WallClock() if clock is None else clock
         """The class's one clock (its robots' too)."""
         self.schedule = schedule or Schedule(TICK_PERIOD_S, self.clock)
@@ -275,6 +279,8 @@ class Classroom:
                           "at its spawn pose", name, error)
         if self._recorder is not None:
             host.recording = self._recorder.record(name, host.robot)
+        if self._on_robot is not None:
+            self._on_robot(name, host)
         return host
 
     def __iter__(self) -> Iterator[tuple[str, RobotHost]]:

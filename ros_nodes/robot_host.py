@@ -30,6 +30,7 @@ from ros_nodes.robot_interface import (
 )
 from ros_nodes.robot_services import require_admin
 from ros_nodes.sensors import Sensor
+from ros_nodes.simulation_services import WATCHABLE_SERVICES
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.access import DriveRules
 from rosbridge.core.bridge import Bridge
@@ -65,7 +66,8 @@ enrolled the name: the page keeps it)."""
 DRIVE_RULES = DriveRules(
     topics=frozenset(spec.name for spec in ROBOT_TOPICS if spec.direction == "in"),
     services=frozenset({RESET_SERVICE}),
-    watch_services=(*RESERVED_NAMESPACES, RESET_SERVICE, REPUBLISH_SERVICE),
+    watch_services=(*RESERVED_NAMESPACES, RESET_SERVICE, REPUBLISH_SERVICE,
+                    *WATCHABLE_SERVICES),
     watch_actions=frozenset({TF_REPUBLISHER_ACTION}),
     hint=": connect to ws://HOST:9090/robots/NAME?token=TOKEN with the robot's token (the "
          "links file, or the page the student enrolled it with)")

@@ -169,6 +169,14 @@ if ! bash scripts/build_tf2_msgs.sh >/dev/null; then
     skipping "could not build tf2_msgs (not root, or no apt-get: allowed to fail); the node" \
         "will run without /tf"
 fi
+# simulation_interfaces and turtlesim's services, likewise (tests/test_simulation_interfaces_ros.py;
+# about a minute, once): without them those tests are skipped and --ros offers neither.
+if ! bash scripts/build_simulation_interfaces.sh >/dev/null; then
+    $can_apt && fail "could not build simulation_interfaces and turtlesim" \
+        "(bash scripts/build_simulation_interfaces.sh)"
+    skipping "could not build simulation_interfaces (not root, or no apt-get: allowed to" \
+        "fail); their ROS graph tests will be skipped"
+fi
 # --- end of ROS 2 from PyPI -------------------------------------------------------------------
 
 python3 -m ruff check .

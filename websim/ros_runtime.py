@@ -28,6 +28,8 @@ from rclpy.signals import SignalHandlerOptions
 
 from ros_nodes.robot_interface import CLOCK
 from ros_nodes.robot_messages import clock_msg
+from ros_nodes.simulation_node import SimulationNode
+from ros_nodes.simulation_services import SimulationServices
 from ros_nodes.virtual_robot import VirtualRobotNode, qos_profile
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge
@@ -69,7 +71,8 @@ class RosRuntime:
     """
 
     def __init__(self, robot: VirtualRobot, bridge: Bridge,
-                 loop: asyncio.AbstractEventLoop, writers: Writers | None = None) -> None:
+                 loop: asyncio.AbstractEventLoop, writers: Writers | None = None, *,
+                 simulation: SimulationServices | None = None) -> None:
         self._bridge = bridge
 
         def write_queued() -> None:  # what a function handed to the loop queued, at once
@@ -105,10 +108,20 @@ class RosRuntime:
         self.executor.add_node(self.relay_node)
         self.actions = RosActions(self.relay_node, access.post, loop.call_later, self.executor)
         self._thread = threading.Thread(target=self._spin, name="rclpy-executor", daemon=True)
+        # The simulation services in an executor of their own: a step waits for ticks.
+        self.simulation_node = None if simulation is None else SimulationNode(
+            simulation, access, context=self.context)
+        self.simulation_executor = SingleThreadedExecutor(context=self.context)
+        if self.simulation_node is not None:
+            self.simulation_executor.add_node(self.simulation_node)
+        self._simulation_thread = threading.Thread(
+            target=spin_until_shutdown, args=(self.simulation_executor, self.context),
+            name="rclpy-simulation", daemon=True)
 
     def start(self) -> None:
         """Spin the executor and relay the bridge's topics and actions from now on."""
         self._thread.start()
+        self._simulation_thread.start()
         self._bridge.graph.attach(self.relay)
         self._bridge.actions.attach(self.actions)
 
@@ -124,10 +137,14 @@ class RosRuntime:
         self._bridge.graph.attach(None)
         self._bridge.actions.attach(None)
         self.executor.shutdown(timeout_sec=timeout_s)
+        self.simulation_executor.shutdown(timeout_sec=timeout_s)
         self.robot_node.destroy_node()
         self.relay_node.destroy_node()
+        if self.simulation_node is not None:
+            self.simulation_node.destroy_node()
         self.context.try_shutdown()
         self._thread.join(timeout_s)
+        self._simulation_thread.join(timeout_s)
 
 
 CLOCK_NODE_NAME = "websim_clock"

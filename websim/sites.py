@@ -32,6 +32,8 @@ from ros_nodes.robot_description import robot_json
 from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
 from ros_nodes.robot_interface import ROBOTS_PREFIX
 from ros_nodes.robot_server import SimServer
+from ros_nodes.simulation_services import SimulationServices, add_simulation_services
+from ros_nodes.simulator_control import OneRobotWorld
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.clock import Clock
 from rosbridge.core.limits import ClientLimits, LatchedBytes, OriginPolicy
@@ -57,6 +59,8 @@ class Site:
         description: ``robot.json`` of a robot without a simulation here (a replay's).
         ros: rclpy in the server (``--ros``: ``websim.ros_runtime.RosRuntime`` or
             ``ClassRosRuntime``) while it runs, else None.
+        simulation: the single robot's simulation services (``simulation_interfaces``),
+            which ``--ros`` also offers on the graph; None for a class.
     """
 
     front: WebSocketFront
@@ -69,6 +73,7 @@ class Site:
     headline: str = ""
     description: str | None = None
     ros: Any = None
+    simulation: SimulationServices | None = None
 
     def close(self) -> None:
         """Close the recordings, save a class's state and release its file (at shutdown)."""
@@ -154,8 +159,11 @@ def single_robot(robot: VirtualRobot, token: str, limits: ClientLimits,
         recorder: records the robot (``--record``); None: nothing is recorded.
     """
     server = SimServer(robot, token, limits=limits, origins=origins)
+    simulation = add_simulation_services(server.bridge,
+                                         OneRobotWorld(server.host, SINGLE_ROBOT_NAME))
     site = Site(server, robot=robot, ws_port=ws_port, recorder=recorder,
-                headline=f"world '{robot.sim.world.name}', {robot.sim.mode} mode")
+                headline=f"world '{robot.sim.world.name}', {robot.sim.mode} mode",
+                simulation=simulation)
     if recorder is not None:
         recording = recorder.record(SINGLE_ROBOT_NAME, robot)
         server.host.recording = recording
@@ -202,7 +210,7 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
                               max_robots=args.max_robots, idle_pause_s=args.idle_pause,
                               lazy=args.worker, clock=clock, state=state,
                               latched=LatchedBytes.for_server(limits),
-                              recorder=recorder)
+                              recorder=recorder, on_robot=simulated)
     except BaseException:
         state.close()
         raise
@@ -235,6 +243,14 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
                            f"{_url_name(host)} (--public-host: the name or address students "
                            "reach)")
     return site
+
+
+def simulated(name: str, host: RobotHost) -> None:
+    """A class robot's world of its own, with the simulation services over it.
+
+    ``simulation_interfaces`` and turtlesim's names (``ros_nodes.simulation_services``).
+    """
+    add_simulation_services(host.bridge, OneRobotWorld(host, name))
 
 
 def public_host(bind: str) -> str:

@@ -90,18 +90,25 @@ def shipped_definitions(folder: Path = INTERFACES_DIR) -> dict[str, Any]:
         name = f"{path.parent.parent.name}/srv/{path.stem}"
         request, response = SRV_SEPARATOR.split(path.read_text(encoding="utf-8"), maxsplit=1)
         for part, text in (("Request", request), ("Response", response)):
-            parsed = get_types_from_msg(text.strip(), f"{name}_{part}")
-            # rosbags names it pkg/srv/msg/Type_Part; ROS 2 (and rclpy) pkg/srv/Type_Part
-            types.update({key.replace("/srv/msg/", "/srv/"): value
-                          for key, value in parsed.items()})
+            types.update(_part_types(text, name, part))
     for path in sorted(folder.glob("*/action/*.action")):
         name = f"{path.parent.parent.name}/action/{path.stem}"
         parts = SRV_SEPARATOR.split(path.read_text(encoding="utf-8"), maxsplit=2)
         for part, text in zip(("Goal", "Result", "Feedback"), parts, strict=True):
-            parsed = get_types_from_msg(text.strip(), f"{name}_{part}")
-            types.update({key.replace("/action/msg/", "/action/"): value
-                          for key, value in parsed.items()})
+            types.update(_part_types(text, name, part))
     return types
+
+
+def _part_types(text: str, name: str, part: str) -> dict[str, Any]:
+    """A service's or action's part (``pkg/srv/Type`` + ``Request``) as ``pkg/srv/Type_Part``.
+
+    Parsed as the message ``pkg/msg/Type_Part``, so that a field of a type of its own package
+    named without it (``Result result``) is ``pkg/msg/Result``, as rosidl reads it.
+    """
+    package, kind, type_name = name.split("/")
+    parsed = get_types_from_msg(text.strip(), f"{package}/msg/{type_name}_{part}")
+    (consts, fields), = parsed.values()
+    return {f"{package}/{kind}/{type_name}_{part}": (consts, fields)}
 
 
 def load() -> None:

@@ -177,7 +177,8 @@ def test_action_servers_are_the_tf_republishers_and_interfaces_list_the_known_ty
     servers: list[Any] = []
     ros.get_action_servers(lambda values: servers.append(values["action_servers"]))
     wait_for(lambda: servers, ANSWER_TIMEOUT_S, "the action servers")
-    assert servers == [["/tf2_web_republisher"]]  # served in-process (rosbridge.tf)
+    # served in-process: rosbridge.tf's, and the simulation's (ros_nodes.simulation_services)
+    assert servers == [["/simulate_steps", "/tf2_web_republisher"]]
     interfaces = call(ros, "interfaces")["ok"]["interfaces"]
     assert {"nav_msgs/msg/Odometry", "rcl_interfaces/msg/Log",
             "rosapi_msgs/srv/GetParam"} <= set(interfaces)

@@ -52,13 +52,26 @@ class ViaGraph:
     response: Callable[[list[Outcome]], Mapping[str, Any]]
 
 
-ServiceHandler = Callable[[Mapping[str, Any], Session], "Mapping[str, Any] | ViaGraph"]
-"""An in-process service: (args, caller) -> response values (or ``ViaGraph``); raises
-``ServiceError``."""
-
-
 Answer = Callable[[bool, Any], None]
 """``answer(ok, values_or_reason)``: how a call's outcome reaches its caller."""
+
+
+@dataclass(frozen=True)
+class Later:
+    """An in-process service's answer that comes later (a simulation stepped N ticks).
+
+    Attributes:
+        start: called at once with the call's ``Answer``, which its owner calls once, later
+            (nothing reaches a caller that has left). The owner bounds what it holds.
+    """
+
+    start: Callable[[Answer], None]
+
+
+ServiceHandler = Callable[[Mapping[str, Any], Session],
+                          "Mapping[str, Any] | ViaGraph | Later"]
+"""An in-process service: (args, caller) -> response values (or ``ViaGraph``, ``Later``);
+raises ``ServiceError``."""
 
 
 @dataclass
@@ -227,6 +240,9 @@ class Services:
         answer = self._answer_for(session, call_id, service)
         if isinstance(values, ViaGraph):
             self._via_graph(values, lambda response: answer(True, response))
+            return
+        if isinstance(values, Later):
+            values.start(answer)
             return
         answer(True, dict(values))
 
