@@ -57,6 +57,8 @@ class Site:
         description: ``robot.json`` of a robot without a simulation here (a replay's).
         ros: rclpy in the server (``--ros``: ``websim.ros_runtime.RosRuntime`` or
             ``ClassRosRuntime``) while it runs, else None.
+        ros_parameters: overrides of the single robot's node parameters with ``--ros``
+            (``websim grade``: a reliable ``/scan``).
     """
 
     front: WebSocketFront
@@ -69,6 +71,7 @@ class Site:
     headline: str = ""
     description: str | None = None
     ros: Any = None
+    ros_parameters: dict[str, Any] = field(default_factory=dict)
 
     def close(self) -> None:
         """Close the recordings, save a class's state and release its file (at shutdown)."""
