@@ -149,6 +149,17 @@ def submission(folder: Path, script: str, declaration: str) -> Path:
     return folder
 
 
+def grade_scenario(tmp_path: Path, name: str, text: str, folder: Path) -> dict[str, Any]:
+    """Grade the submission ``folder`` declares on the scenario ``text``; its report."""
+    scenario = tmp_path / f"{name}.yaml"
+    scenario.write_text(text)
+    out = tmp_path / "out"
+    assert cli.main(["grade", str(scenario), "--submission", str(folder), "--out",
+                     str(out)]) == 0
+    graded: dict[str, Any] = json.loads((out / name / "report.json").read_text())
+    return graded
+
+
 def test_a_timer_driven_node_regrades_identically_to_the_last_digit(tmp_path: Path) -> None:
     """The usual course style: a 7 Hz timer on sim time (not the 20 Hz tick), the latest
     /odom from a callback, its start time read before the first /clock, its setpoint a ROS
@@ -183,17 +194,12 @@ def test_a_timer_driven_node_regrades_identically_to_the_last_digit(tmp_path: Pa
 def test_a_reliable_scan_subscriber_reading_minus_pi_to_pi_follows_the_wall(
         tmp_path: Path) -> None:
     """/scan is offered reliable in a graded run, and the scenario sets -pi..pi."""
-    scenario = tmp_path / "corridor_right.yaml"
-    scenario.write_text(CORRIDOR_RIGHT)
     folder = submission(tmp_path / "dave", "reliable_scan_follower.py", """\
         command: python3 reliable_scan_follower.py
         ros: true
         ros_parameters: {distance: WEBSIM_DESIRED_DISTANCE_M, speed: WEBSIM_SPEED_MPS}
         """)
-    out = tmp_path / "out"
-    assert cli.main(["grade", str(scenario), "--submission", str(folder), "--out",
-                     str(out)]) == 0
-    graded = json.loads((out / "corridor_right" / "report.json").read_text())
+    graded = grade_scenario(tmp_path, "corridor_right", CORRIDOR_RIGHT, folder)
     assert graded["passed"] is True, graded["reason"]
     assert graded["run"]["ended_by"] == "end_point"
     assert "/scan" in graded["run"]["subscribed"] and graded["run"]["incompatible_qos"] == []
@@ -213,17 +219,12 @@ def test_an_incompatible_subscription_is_named_in_the_reason(tmp_path: Path) -> 
 
 
 def test_a_node_that_exits_after_its_goal_is_scored_until_then(tmp_path: Path) -> None:
-    scenario = tmp_path / "goal_in_the_open.yaml"
-    scenario.write_text(GOAL_IN_THE_OPEN)
     folder = submission(tmp_path / "frank", "goal_then_exit.py", """\
         command: [python3, goal_then_exit.py]
         ros: true
         ros_parameters: {goal_x: WEBSIM_GOAL_X_M, goal_y: WEBSIM_GOAL_Y_M}
         """)
-    out = tmp_path / "out"
-    assert cli.main(["grade", str(scenario), "--submission", str(folder), "--out",
-                     str(out)]) == 0
-    graded = json.loads((out / "goal_in_the_open" / "report.json").read_text())
+    graded = grade_scenario(tmp_path, "goal_in_the_open", GOAL_IN_THE_OPEN, folder)
     assert graded["passed"] is True and graded["score"] > 0.9, graded["reason"]
     assert graded["controller"]["exit_code"] == 0 and graded["run"]["ended_by"] == "stopped"
     assert "the controller exited with code 0 after its last command" in graded["reason"]

@@ -16,7 +16,13 @@ import textwrap
 from pathlib import Path
 from typing import Any
 
+import pytest
+
+from grading import load_scenario
+from physics import ConfigError
 from websim import cli
+from websim.grade_class import SUBMISSION_FILE, Declared, submission_declaration
+from websim.grade_run import GradeOptions, ros_arguments
 
 SANDBOXED = shutil.which("bwrap") is not None and os.geteuid() == 0
 """Where the sandbox can run, the tests grade in it; elsewhere with --no-sandbox (no skip)."""
@@ -136,3 +142,35 @@ def test_the_reason_of_a_silent_controller_suggests_other_triggers_only(
     assert "did not answer /odom" in reason and "--mode wall-clock" in reason
     assert "--step-on scan" in reason and "--step-on rate" in reason
     assert "--step-on odom" not in reason
+
+
+def test_ros_parameters_map_a_scenarios_values_onto_a_nodes_parameters(tmp_path: Path) -> None:
+    declaration = tmp_path / SUBMISSION_FILE
+    declaration.write_text("command: python3 node.py\nros: true\n"
+                           "ros_parameters: {kp: WEBSIM_KP, target.yaw: WEBSIM_SETPOINT_RAD}\n")
+    declared = submission_declaration(tmp_path)
+    assert declared.ros_parameters == (("kp", "WEBSIM_KP"), ("target.yaw", "WEBSIM_SETPOINT_RAD"))
+    options = GradeOptions(ros=True, ros_parameters=(("target.yaw", "WEBSIM_SETPOINT_RAD"),))
+    assert ros_arguments(load_scenario("heading_pid"), options) == [
+        "--ros-args", "-p", "use_sim_time:=true", "-p", "target.yaw:=1.5707963267948966"]
+    with pytest.raises(ConfigError, match="WEBSIM_KP is not set in scenario heading_pid "
+                                          r"\(it sets: WEBSIM_SETPOINT_RAD\)"):
+        ros_arguments(load_scenario("heading_pid"), declared_options(declared))
+
+
+@pytest.mark.parametrize("entry, message", [
+    ("ros_parameters: {kp: WEBSIM_KP}", "needs 'ros: true'"),
+    ("ros: true\nros_parameters: {kp: KP}", "expected a scenario's variable"),
+    ("ros: true\nros_parameters: {'k p': WEBSIM_KP}", "not a ROS parameter name"),
+    ("ros: true\nros_parameters: [kp]", "'parameter: WEBSIM_NAME' entries"),
+])
+def test_bad_ros_parameters_are_refused_with_the_reason(tmp_path: Path, entry: str,
+                                                        message: str) -> None:
+    (tmp_path / SUBMISSION_FILE).write_text(f"command: python3 node.py\n{entry}\n")
+    with pytest.raises(ConfigError, match=message):
+        submission_declaration(tmp_path)
+
+
+def declared_options(declared: Declared) -> GradeOptions:
+    """The grading options a declaration gives."""
+    return GradeOptions(ros=declared.ros, ros_parameters=declared.ros_parameters)

@@ -55,32 +55,19 @@ def passes_every_scenario(summary: dict[str, Any], suite: str) -> None:
         assert row["passed"] is True, (row["name"], row["reason"])
 
 
-@needs_node
-def test_roslibjs_wall_follower_passes_the_wall_following_suite(tmp_path: Path) -> None:
-    summary = grade("wall_following_suite", "wall_follower.js", tmp_path, "node",
-                    "wall_follower.js")
-    passes_every_scenario(summary, "wall_following_suite")
-    assert summary["total"] > 0.9
-
-
-@needs_rclpy
-def test_rclpy_wall_follower_passes_the_wall_following_suite(tmp_path: Path) -> None:
-    summary = grade("wall_following_suite", "wall_follower_rclpy.py", tmp_path, "python3",
-                    "wall_follower_rclpy.py", ros=True)
-    passes_every_scenario(summary, "wall_following_suite")
-    assert summary["total"] > 0.9
-
-
-@needs_node
-def test_roslibjs_go_to_goal_passes_the_maze(tmp_path: Path) -> None:
-    summary = grade("go_to_goal", "go_to_goal.js", tmp_path, "node", "go_to_goal.js")
-    passes_every_scenario(summary, "go_to_goal")
-    assert summary["total"] > 0.9
-
-
-@needs_rclpy
-def test_rclpy_go_to_goal_passes_the_maze(tmp_path: Path) -> None:
-    summary = grade("go_to_goal", "go_to_goal_rclpy.py", tmp_path, "python3",
-                    "go_to_goal_rclpy.py", ros=True)
-    passes_every_scenario(summary, "go_to_goal")
+@pytest.mark.parametrize("suite, solution, command, ros", [
+    pytest.param("wall_following_suite", "wall_follower.js", ("node",), False,
+                 marks=needs_node, id="roslibjs-wall-following"),
+    pytest.param("wall_following_suite", "wall_follower_rclpy.py", ("python3",), True,
+                 marks=needs_rclpy, id="rclpy-wall-following"),
+    pytest.param("go_to_goal", "go_to_goal.js", ("node",), False,
+                 marks=needs_node, id="roslibjs-go-to-goal"),
+    pytest.param("go_to_goal", "go_to_goal_rclpy.py", ("python3",), True,
+                 marks=needs_rclpy, id="rclpy-go-to-goal"),
+])
+def test_a_reference_solution_passes_every_scenario_of_its_assignment(
+        tmp_path: Path, suite: str, solution: str, command: tuple[str, ...],
+        ros: bool) -> None:
+    summary = grade(suite, solution, tmp_path, *command, solution, ros=ros)
+    passes_every_scenario(summary, suite)
     assert summary["total"] > 0.9
