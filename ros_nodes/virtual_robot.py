@@ -219,6 +219,10 @@ class VirtualRobotNode(Node):
         self._cmd_vel_stamped = bool(_declare(self, parameter_spec("cmd_vel_stamped")))
         scan_reliability = str(_declare(self, parameter_spec("scan_reliability")))
         self._clock_after = clock_after
+        self.publish_hook: Callable[[str, Callable[[], None]], None] | None = None
+        """With ``own_timer=False``: given each tapped message's topic and a function that
+        publishes it, publishes it when it chooses (``websim grade``'s lock step hands a
+        tick's messages to the controller one at a time); None: at once."""
 
         self._robot_publishers: dict[str, Any] = {}
         self._classes: dict[str, Any] = {}
@@ -391,7 +395,9 @@ class VirtualRobotNode(Node):
         """The robot's tap: publish what it publishes (what it accepts came from a client)."""
         if direction != OUT:
             return
-        if topic == CLOCK.name and self._clock_after is not None:
+        if self.publish_hook is not None:
+            self.publish_hook(topic, lambda: self._publish_one(topic, msg))
+        elif topic == CLOCK.name and self._clock_after is not None:
             self._clock_after(lambda: self._publish_one(topic, msg))
         else:
             self._publish_one(topic, msg)

@@ -76,6 +76,16 @@ metrics:
   - kind: wall_following
 """
 
+CLOSE_FAST = """\
+description: the suite's corridor_right_close_fast (0.35 m from the right wall at 0.4 m/s)
+world: corridor
+start: [-0.5, 0.0, 0.2]
+duration_s: 120.0
+parameters: {side: right, desired_distance_m: 0.35, speed_mps: 0.4}
+end: {point: [5.5, 4.0], radius_m: 1.0}
+metrics: [{kind: wall_following}, {kind: smoothness}]
+"""
+
 GOAL_IN_THE_OPEN = """\
 description: to a point in the empty arena and stop there
 world: empty
@@ -189,6 +199,25 @@ def test_a_timer_driven_node_regrades_identically_to_the_last_digit(tmp_path: Pa
                                                  "recording"), load_scenario("heading_pid"),
                                       0.0) for k in (1, 2, 3)]
     assert recordings[0] == recordings[1] == recordings[2]
+
+
+def test_a_node_that_answers_odom_from_the_latest_scan_regrades_identically(
+        tmp_path: Path) -> None:
+    """Two topics, one callback reading the other's latest: the tick's messages reach it one
+    at a time, in the robot's order, so it reads the same scan on every re-grade (when they
+    raced, four re-grades of this scenario scored 0.9811, 0.9814, 0.9825, 0.9817)."""
+    folder = tmp_path / "gina"
+    folder.mkdir()
+    shutil.copy(SOLUTIONS / "wall_follower_rclpy.py", folder)
+    scenario = tmp_path / "close_fast.yaml"
+    scenario.write_text(CLOSE_FAST)
+    out = tmp_path / "out"
+    assert cli.main(["grade", str(scenario), "--ros", "--submission", str(folder), "--out",
+                     str(out), "--runs", "3", "--", "python3", "wall_follower_rclpy.py"]) == 0
+    graded = json.loads((out / "close_fast" / "report.json").read_text())
+    assert graded["passed"] is True, graded["reason"]
+    for name, spread in graded["spread"]["metric_values"].items():
+        assert spread["range"] == 0.0, (name, spread["values"])
 
 
 def test_a_reliable_scan_subscriber_reading_minus_pi_to_pi_follows_the_wall(

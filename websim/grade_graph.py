@@ -6,19 +6,23 @@ fires, on some ticks and not others (a 10 Hz timer on 20 Hz ticks). Lock step ca
 for "its answer" then: an answer is not due at every tick. It waits instead until the
 controller's executor has handled everything of the tick (``ControllerGraph.handshake``):
 
-1. the robot publishes the tick's messages, ``/clock`` last (``websim.ros_runtime``), all
-   from one participant to the controller's, so they reach its reader caches in that order;
-2. the grader calls a service of each controller node (``get_parameters`` with no names,
-   which every rclpy node serves and which changes nothing) and waits for the answer, twice.
-   rclpy's executor handles what one wait found in order (timers, then subscriptions, then
-   services): the first answer means it has taken the tick's messages, ``/clock`` included,
-   which makes the timers due at the tick ready; the second request arrives after that, so
-   it is answered only after those timers ran (and published their ``/cmd_vel``, which the
-   robot has by then: its subscription is handled before the answer in the grader's own
-   executor).
+1. the robot's node hands the tick's messages to the grader (``hold``) instead of publishing
+   them; the grader publishes them one at a time (``deliver``), in the robot's order but
+   ``/clock`` last, from one participant to the controller's;
+2. after each message of a topic the controller subscribes to, the grader calls a service of
+   each controller node (``get_parameters`` with no names, which every rclpy node serves and
+   which changes nothing) and waits for the answer. The request follows the message on the
+   same path, and rclpy's executor handles what one wait found in order (timers, then
+   subscriptions, then services): the answer means the message's callback has run (and
+   published its ``/cmd_vel``, which the robot has by then: its subscription is handled
+   before the answer in the grader's own executor). After ``/clock`` it calls twice: the
+   first answer means the node took the tick's time, which makes its timers due then ready;
+   the second request is answered only after those timers ran.
 
-So every tick the controller sees the same messages and its commands apply at the same
-tick, whatever the machine's load: a re-grade is identical to the last digit. What it does
+So every tick the controller sees the same messages in the same order, one callback at a
+time, and its commands apply at the same tick, whatever the machine's load: a re-grade is
+identical to the last digit (a node that answers ``/odom`` from the latest ``/scan`` reads the
+same scan every time: the one published before, not whichever arrived first). What it does
 not cover: a controller on a ``MultiThreadedExecutor`` or a reentrant callback group (its
 callbacks may still run when it answers), and one paced by the wall clock (``time.sleep``,
 a timer on the steady clock), which ``websim.grade_server.LockStep`` detects.
@@ -31,7 +35,7 @@ deadline) is named in the run's reason, not left to rclpy's warning in its outpu
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from rcl_interfaces.srv import GetParameters
@@ -43,7 +47,7 @@ from rclpy.qos import (
     qos_check_compatible,
 )
 
-from ros_nodes.robot_interface import NODE_BASENAME
+from ros_nodes.robot_interface import CLOCK, NODE_BASENAME
 from rosbridge.graph.names import RELAY_NODE_NAME
 
 OUR_NODES = frozenset({("/", NODE_BASENAME), ("/", RELAY_NODE_NAME)})
@@ -75,6 +79,10 @@ class ControllerGraph:
         self.publishers = dict(publishers)
         self.loop = loop
         self.clients: dict[str, Any] = {}
+        self.held: list[tuple[str, Callable[[], None]]] = []
+        """The tick's messages not published yet: (topic, its publishing function)."""
+        self.served: set[str] = set()
+        """The robot's topics the controller subscribes to (set at the run's start)."""
         self.active: list[str] = []
         """The controller nodes the handshake calls (as ``ready`` last found them)."""
 
@@ -160,9 +168,27 @@ class ControllerGraph:
             return False
         return True
 
-    async def handshake(self, timeout_s: float) -> bool:
-        """Wait until the controller's executors have handled the tick (two round trips)."""
-        return await self.round_trip(timeout_s) and await self.round_trip(timeout_s)
+    def hold(self, topic: str, publish: Callable[[], None]) -> None:
+        """Keep a message of the tick for ``deliver`` (the robot node's ``publish_hook``)."""
+        self.held.append((topic, publish))
+
+    async def deliver(self, timeout_s: float) -> bool:
+        """Publish the tick's messages one at a time, each handled before the next.
+
+        Returns:
+            Whether the controller answered every handshake in time (if not, the rest of the
+            tick's messages are published without waiting).
+        """
+        held, self.held = self.held, []
+        held.sort(key=lambda item: item[0] == CLOCK.name)  # stable: /clock last
+        answered = True
+        for topic, publish in held:
+            publish()
+            if answered and topic in self.served:
+                rounds = 2 if topic == CLOCK.name else 1
+                for _ in range(rounds):
+                    answered = answered and await self.round_trip(timeout_s)
+        return answered
 
 
 def _qos_text(profile: Any) -> str:

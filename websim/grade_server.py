@@ -179,7 +179,7 @@ class LockStep:
     subscription matched (``graph``). Then, in deterministic mode, each tick waits before
     the next: with a trigger, for a /cmd_vel after each time the robot published it (every
     ``every``-th time, for ``rate``), at most ``STEP_TIMEOUT_S``; with a graph, for the
-    controller's executor to have handled the tick (``ControllerGraph.handshake``). Once,
+    controller's executor to have handled the tick (``ControllerGraph.deliver``). Once,
     at ``PROBE_AT_STEP``, it holds the run to see whether the controller publishes unasked.
     Every tick it applies the scenario's timed changes and checks whether the run is over.
 
@@ -298,7 +298,7 @@ class LockStep:
 
     async def _wait_for_handshake(self) -> None:
         self.steps_waited += 1
-        if not await self.graph.handshake(STEP_TIMEOUT_S):
+        if not await self.graph.deliver(STEP_TIMEOUT_S):
             await self._missed(
                 f"the controller's node ({', '.join(self.graph.active)}) did not answer the "
                 f"simulator's handshake within {STEP_TIMEOUT_S:g} s",
@@ -380,6 +380,7 @@ class LockStep:
                         await graph.round_trip(STEP_TIMEOUT_S) and \
                         graph.subscriptions() == (served, refused) and graph.matched(served):
                     self.graph = graph
+                    graph.served = set(served)
                     self.subscribed_at_start = sorted(served)
                     self.incompatible_qos = refused
                     return
@@ -504,8 +505,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not graphs and site.ros is not None:
             from websim.grade_graph import ControllerGraph
             node = site.ros.robot_node
-            graphs.append(ControllerGraph(node, node.robot_publishers(),
-                                          asyncio.get_running_loop()))
+            graph = ControllerGraph(node, node.robot_publishers(), asyncio.get_running_loop())
+            node.publish_hook = graph.hold  # lock step hands the ticks' messages over
+            graphs.append(graph)
         return graphs[0] if graphs else None
 
     lock_step = LockStep(scenario, robot, clock, subscribed, connected, mode=args.mode,
