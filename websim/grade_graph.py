@@ -4,7 +4,7 @@ An rclpy controller is usually a node driven by a timer on sim time: it keeps th
 ``/odom`` and ``/scan`` from its subscriptions and publishes ``/cmd_vel`` when its timer
 fires, on some ticks and not others (a 10 Hz timer on 20 Hz ticks). Lock step cannot wait
 for "its answer" then: an answer is not due at every tick. It waits instead until the
-controller's executor has handled everything of the tick (``ControllerGraph.handshake``):
+controller's executor has handled everything of the tick (``ControllerGraph.deliver``):
 
 1. the robot's node hands the tick's messages to the grader (``hold``) instead of publishing
    them; the grader publishes them one at a time (``deliver``), in the robot's order but

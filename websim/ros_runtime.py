@@ -11,7 +11,7 @@ there.
 
 Each tick's ``/clock`` goes onto the graph after the tick's other messages (``clock_after``):
 a node on sim time then has the tick's ``/odom`` and ``/scan`` before its timers see the
-tick's time (``websim grade``'s lock step relies on it).
+tick's time (``websim grade``'s lock step goes further: ``VirtualRobotNode.publish_hook``).
 
 Two nodes share one rclpy ``Context`` (no global state; rclpy's signal handlers stay off, the
 server handles SIGINT and SIGTERM): ``virtual_robot`` and ``rosbridge_websocket``, the relay
