@@ -10,7 +10,8 @@ For each scenario of the suite (a scenario file is a suite of one), and each of 
    ``WEBSIM_URL`` and the scenario's ``WEBSIM_<NAME>``, until it exits or the run ends;
 3. the score, from the recording's ground truth (``grading.recorded``) by the scenario's
    metrics (``grading.evaluate``); a run that did not run its course (the controller never
-   subscribed, stopped answering, or ended first) scores 0 with the reason.
+   subscribed, stopped answering, or crashed first) scores 0 with the reason; a controller
+   that exits with code 0 ends the run, which is scored until its last command.
 
 Each run writes ``report.json`` in ``DIR/SCENARIO/`` (``DIR/SCENARIO/run-K/`` with
 ``--runs``), prints one line per scenario, and the suite's total; the exit code is 0 when

@@ -5,21 +5,24 @@ namespace) as ``python -m websim.grade_server SUITE --scenario NAME --out DIR ..
 ``websim serve`` with one robot, built from the scenario (world, start, mode, payload, seed),
 recording to ``DIR/recording`` (``--record``), with five things of its own:
 
-- **the scenario's clock**: nothing ticks until the controller subscribes to its trigger
-  topic (``/odom``, or what ``--step-on`` names), at most ``STARTUP_TIMEOUT_S``; then the
-  run lasts ``duration_s`` of sim time, or until the robot comes within the scenario's
-  ``end``, and the server stops itself;
-- **its timed changes** (payload, mode) at the first tick at or after their time;
+- **the scenario's clock**: sim time from 0 (``/clock`` starts at 0, as Gazebo's does);
+  nothing ticks until the controller is ready (``LockStep``: subscribed to what it is stepped
+  on, ``--step-on auto`` by default), at most ``STARTUP_TIMEOUT_S``; then the run lasts
+  ``duration_s`` of sim time, or until the robot comes within the scenario's ``end``, and
+  the server stops itself;
+- **its timed changes** (payload, mode) at the first tick at or after their time, and its
+  LiDAR (``Scenario.lidar``: the scan's angles a world or a scenario sets);
 - **lock step** (``--mode deterministic``): on sim time at ``--speed max``, and after each
-  tick at which the controller is due (``LockStep``) the next tick waits for its /cmd_vel,
-  so the run depends only on the controller's answers and the seed; in ``wall-clock`` mode
-  it runs at 1x and waits for nobody;
+  tick the next waits for the controller (``LockStep``): for its /cmd_vel after each message
+  of what it answers (rosbridge), or until its node's executor has handled each of the
+  tick's messages (``--ros``: ``websim.grade_graph``), so the run depends only on the
+  controller's answers and the seed; in ``wall-clock`` mode it runs at 1x and waits for
+  nobody;
 - **the ROS graph** (``--ros``, for an rclpy controller): ``websim serve --ros``'s nodes in
-  this process (``websim.ros_runtime``); the controller's subscription to the trigger topic
-  on the graph starts the run as a rosbridge client's does (``graph_subscribed``: once the
-  robot's publisher has matched it, so the first message reaches it), and its
-  /cmd_vel from the graph answers the lock step as a rosbridge client's does (the robot's
-  tap sees both);
+  this process (``websim.ros_runtime``), ``/scan`` offered reliable
+  (``GRADE_NODE_PARAMETERS``); the controller's node spinning with its subscriptions matched
+  starts the run, its /cmd_vel from the graph reaches the robot's tap as a rosbridge
+  client's does, and a subscription the robot cannot serve is named (incompatible QoS);
 - **no changes from the controller**: ``/reset_simulation`` is refused; parameters and pause
   need the admin token, which only this process knows (the controller's environment does not
   hold it).
