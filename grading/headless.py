@@ -74,7 +74,8 @@ def run_headless(scenario: Scenario,
             (the message says which, and when).
     """
     simulation = Simulation(scenario.world, scenario.robot, mode=scenario.mode,
-                            seed=scenario.seed, noise=scenario.world.noise_over(NoiseParams()))
+                            seed=scenario.seed, lidar=scenario.lidar,
+                            noise=scenario.world.noise_over(NoiseParams()))
     period = scenario.controller_period_ticks
     ticks = math.floor(scenario.duration_s / simulation.dt_s + 1e-9)
     pending = list(scenario.changes)

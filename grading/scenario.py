@@ -17,6 +17,7 @@ format)::
     changes:                          # at set times: payload, mode, parameters
       - {at_s: 5.0, payload: {scale: 2.0}, parameters: {setpoint_rad: 0.0}}
     end: {point: [5.5, 4.0], radius_m: 1.0}   # optional: the run ends there
+    lidar: {angle_min_rad: -pi}       # optional: the scan's angles (over the world's)
     metrics:
       - {kind: heading_step, threshold: 3.0, weight: 1.0}
 
@@ -49,7 +50,7 @@ from grading.geometry import nearest_obstacles, obstacle_origins, world_shapes
 from grading.metrics import METRICS
 from grading.metrics.heading_step import setpoint_schedule
 from grading.metrics.wall_following import MIT_END_RADIUS_M
-from physics.params import RobotParams
+from physics.params import LidarParams, RobotParams
 from physics.pid import CONTROL_PERIOD_S
 from physics.robot import MODES
 from physics.shipped import by_name, shipped
@@ -70,13 +71,14 @@ from physics.validation import (
     located,
     type_name,
 )
-from physics.world import WORLDS_DIR, World, load_world
+from physics.world import WORLDS_DIR, World, lidar_overrides, load_world
 
 SCENARIOS_DIR = shipped("physics", "examples/scenarios")
 """The shipped scenarios and suites; ``load_suite("heading_pid")`` looks here."""
 
 SCENARIO_KEYS = ("name", "description", "world", "start", "mode", "payload", "duration_s",
-                 "seed", "controller_rate_hz", "parameters", "changes", "end", "metrics")
+                 "seed", "controller_rate_hz", "parameters", "changes", "end", "lidar",
+                 "metrics")
 REQUIRED_KEYS = ("world", "duration_s", "metrics")
 SUITE_KEYS = ("name", "description", "defaults", "scenarios")
 """``defaults`` is not read: it holds what scenarios written inline share, with a YAML anchor
@@ -200,7 +202,8 @@ class Scenario:
         name: its name (in a suite, unique).
         description: what it tests, for the report.
         source: the file it was read from (a suite's, for one written inline).
-        world: the world, its ``start`` the scenario's start pose.
+        world: the world, its ``start`` the scenario's start pose and its ``lidar`` the
+            world's LiDAR settings with the scenario's over them (``Scenario.lidar``).
         mode: the motion model at the start (``kinematic`` or ``dynamic``).
         robot: the robot's parameters at the start (the payload applied).
         duration_s: the run's length and timeout (s of sim time).
@@ -231,6 +234,11 @@ class Scenario:
     def start(self) -> Pose2D:
         """The start pose in the map frame (m, rad)."""
         return self.world.start
+
+    @property
+    def lidar(self) -> LidarParams:
+        """The LiDAR of the run: the shipped one with the world's and the scenario's values."""
+        return self.world.lidar_over(LidarParams())
 
     @property
     def controller_period_ticks(self) -> int:
@@ -409,11 +417,15 @@ def scenario_from_document(document: Any, *, source: str, folder: Path,
         raise fail(located(source, top, "end", where_prefix + "end"),
                    f"the start {list(start)} is already within {end.radius_m:g} m of the end "
                    f"point ({end.x_m:g}, {end.y_m:g}): the run would end at once")
+    lidar = dict(world.lidar)
+    lidar.update(lidar_overrides(at(top, "lidar", "lidar"), top.get("lidar")))
     facts = _facts(robot, duration_s, parameters, changes, end)
     metrics = _metrics(source, top, where_prefix, dict(parameters), facts)
     return Scenario(
         name=name, description=_text(source, top, "description", "", where_prefix),
-        source=source, world=dataclasses.replace(world, start=start), mode=mode, robot=robot,
+        source=source, world=dataclasses.replace(world, start=start,
+                                                 lidar=tuple(lidar.items())),
+        mode=mode, robot=robot,
         duration_s=duration_s, seed=seed, controller_rate_hz=rate,
         parameters=tuple(parameters), changes=changes, end=end, metrics=metrics)
 

@@ -80,6 +80,24 @@ def unwrapped_yaw(trajectory: Trajectory) -> FloatArray:
     return np.unwrap(np.array([sample.yaw_rad for sample in trajectory], dtype=np.float64))
 
 
+def circular_mean_rad(angles_rad: npt.ArrayLike) -> float:
+    """The mean direction of angles (rad, in (-pi, pi]): atan2(mean sin, mean cos).
+
+    Every average of angles in the metrics is this one: the arithmetic mean of headings or
+    heading errors that straddle the ±pi wrap cancels out (3.07 and -3.07 rad average 0,
+    though both are nearly half a turn off), the circular mean does not (it is ±pi there).
+    Where the angles are close together it is their arithmetic mean, to within the cube of
+    their spread.
+
+    Raises:
+        ValueError: no angles.
+    """
+    values = np.asarray(angles_rad, dtype=np.float64)
+    if values.size == 0:
+        raise ValueError("the circular mean of no angles")
+    return float(np.arctan2(np.mean(np.sin(values)), np.mean(np.cos(values))))
+
+
 def path_length_m(trajectory: Trajectory) -> float:
     """Length of the polyline through the samples' positions (m)."""
     steps = np.diff(positions(trajectory), axis=0)

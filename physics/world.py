@@ -16,6 +16,8 @@ The format (every coordinate in the ``map`` frame, metres and radians)::
     localization: none           # none | perfect: websim publishes map -> odom itself
     noise:                       # overrides the parameter file's noise section, key by key
       odom_linear_sigma_mps: 0.02
+    lidar:                       # overrides the parameter file's lidar section (LIDAR_KEYS)
+      angle_min_rad: -pi         # the first beam's angle: -pi gives -pi..pi, as rplidar_ros
 
 Boxes and polylines become wall segments; circles stay circles. Every error raises
 ``ConfigError`` naming the file and the entry, e.g. ``worlds/maze.yaml: walls[3]: ...``.
@@ -26,6 +28,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,7 +41,7 @@ from physics.map_grid import (
     default_resolution_m,
     grid_over,
 )
-from physics.params import NoiseParams
+from physics.params import LidarParams, NoiseParams
 from physics.shipped import by_name, shipped
 from physics.snapshots import Pose2D
 from physics.validation import (
@@ -63,8 +66,17 @@ the real robot, and websim must not fight them) or ``perfect`` (websim publishes
 from the ground truth, so map-frame tools work without a localizer)."""
 
 _TOP_LEVEL_KEYS = ("name", "start", "walls", "polylines", "boxes", "circles",
-                   "map_resolution_m", "localization", "noise")
+                   "map_resolution_m", "localization", "noise", "lidar")
 _NOISE_KEYS = tuple(item.name for item in dataclasses.fields(NoiseParams))
+
+LIDAR_KEYS = ("angle_min_rad",)
+"""What a world (or a scenario) may set of the LiDAR: the scan's angle range. The beams
+always cover a full turn (``LidarParams.angle_increment_rad`` = 2 pi / num_rays), so the first
+beam's angle sets the range: 0 (the default) gives 0..2pi, as the course's platform; -pi gives
+-pi..pi (less one increment), as rplidar_ros and most course code that reads sectors expect."""
+
+PI_ANGLE = re.compile(r"([+-]?)pi(?:/([1-9][0-9]?))?\Z")
+"""An angle given as a multiple of pi in a file: ``pi``, ``-pi``, ``pi/2``, ``-pi/4``."""
 
 
 @dataclass(frozen=True)
@@ -144,6 +156,8 @@ class World:
         localization: one of ``LOCALIZATIONS``: who publishes map -> odom.
         noise: noise sigmas that override the parameter file's, as (``NoiseParams`` field,
             value) pairs (``noise_over``).
+        lidar: LiDAR parameters that override the parameter file's, as (``LidarParams``
+            field, value) pairs (``lidar_over``; ``LIDAR_KEYS``).
     """
 
     name: str
@@ -155,10 +169,16 @@ class World:
     map_resolution_m: float = DEFAULT_MAP_RESOLUTION_M
     localization: str = LOCALIZATIONS[0]
     noise: tuple[tuple[str, float], ...] = ()
+    lidar: tuple[tuple[str, float], ...] = ()
 
     def noise_over(self, base: NoiseParams) -> NoiseParams:
         """``base`` (the parameter file's noise) with this world's sigmas in place of its."""
         return dataclasses.replace(base, **dict(self.noise))
+
+    def lidar_over(self, base: LidarParams) -> LidarParams:
+        """``base`` (the parameter file's LiDAR) with this world's values in place of its."""
+        values: dict[str, Any] = dict(self.lidar)
+        return dataclasses.replace(base, **values) if values else base
 
     @property
     def bounds(self) -> tuple[float, float, float, float]:
@@ -237,7 +257,8 @@ def world_from_dict(document: Any, *, source: str = "<world>") -> World:
                       f"{source}: map_resolution_m",
                       top.get("map_resolution_m", DEFAULT_MAP_RESOLUTION_M)),
                   localization=_localization(source, top.get("localization", LOCALIZATIONS[0])),
-                  noise=_noise(source, top.get("noise")))
+                  noise=_noise(source, top.get("noise")),
+                  lidar=lidar_overrides(f"{source}: lidar", top.get("lidar")))
     if "map_resolution_m" not in top:  # a large world's default map is coarser, not an error
         world = dataclasses.replace(world, map_resolution_m=default_resolution_m(world.bounds))
     grid_over(world.bounds, world.map_resolution_m, f"{source}: map_resolution_m")
@@ -264,6 +285,33 @@ def _noise(source: str, value: Any) -> tuple[tuple[str, float], ...]:
         raise ConfigError(f"{where}.{error}") from None
     return tuple((name, float(getattr(checked, name))) for name in _NOISE_KEYS
                  if name in mapping)
+
+
+def lidar_overrides(where: str, value: Any) -> tuple[tuple[str, float], ...]:
+    """A ``lidar`` section (a world's, a scenario's): ``LIDAR_KEYS`` values, checked.
+
+    An angle is a number (rad) or a multiple of pi (``PI_ANGLE``: ``-pi``, ``pi/2``).
+    """
+    if value is None:
+        return ()
+    mapping = as_mapping(where, value)
+    check_keys(where, mapping, LIDAR_KEYS)
+    values: dict[str, Any] = {}
+    for key, given in mapping.items():
+        match = PI_ANGLE.match(given) if isinstance(given, str) else None
+        if match:
+            values[key] = (-1.0 if match.group(1) == "-" else 1.0) * math.pi \
+                / int(match.group(2) or 1)
+        elif isinstance(given, str):
+            raise fail(f"{where}.{key}", f"expected an angle in rad or a multiple of pi "
+                                         f"(pi, -pi, pi/2), got {given!r:.40}")
+        else:
+            values[key] = as_finite_float(f"{where}.{key}", given)
+    try:
+        LidarParams(**values)
+    except ConfigError as error:
+        raise ConfigError(f"{where}.{error}") from None
+    return tuple(values.items())
 
 
 def _as_list(source: str, top: Any, key: str) -> list[Any]:

@@ -160,6 +160,10 @@ WORLD_LOCALIZATION = "world"
 MAX_SEED = 2**32 - 1
 """Largest noise seed (numpy accepts any, ROS integers are 64-bit; 32 bits is plenty)."""
 
+SCAN_RELIABILITIES = ("best_effort", "reliable")
+"""``scan_reliability``: /scan's publisher as the topic table says (sensor data), or reliable
+(``websim grade --ros`` offers it so: a reliable publisher serves both kinds of subscriber)."""
+
 PARAMETERS = (
     ParameterSpec("mode", PARAMETER_STRING, "motion model", "", MODES[0], choices=MODES),
     _robot("mass_kg", "chassis mass; acts in dynamic mode"),
@@ -189,6 +193,12 @@ PARAMETERS = (
     ParameterSpec("cmd_vel_stamped", PARAMETER_BOOL,
                   "subscribe /cmd_vel as geometry_msgs/TwistStamped (as Jazzy's navigation "
                   "stack publishes) instead of Twist", "", False, set_by=AT_START,
+                  embedded=False),
+    ParameterSpec("scan_reliability", PARAMETER_STRING,
+                  "what /scan's publisher offers: best_effort (sensor data, as lidar drivers "
+                  "publish) or reliable, which best-effort and reliable subscribers both "
+                  "receive (a RELIABLE subscriber gets nothing from a best-effort publisher)",
+                  "", SCAN_RELIABILITIES[0], choices=SCAN_RELIABILITIES, set_by=AT_START,
                   embedded=False),
 )
 """Every parameter of the virtual robot, in the order services list them."""

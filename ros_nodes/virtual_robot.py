@@ -68,6 +68,7 @@ from ros_nodes.robot_interface import (
     NODE_BASENAME,
     PUBLISHED_TOPICS,
     RESET_SERVICE,
+    SCAN,
     TopicSpec,
 )
 from ros_nodes.robot_messages import prefixed_frames
@@ -118,17 +119,20 @@ def relative(name: str) -> str:
     return name.lstrip("/")
 
 
-def qos_profile(spec: TopicSpec) -> QoSProfile:
+def qos_profile(spec: TopicSpec, reliability: str | None = None) -> QoSProfile:
     """The QoS a topic of the robot is published with (``TopicSpec.qos_profile``).
 
     ``sensor_data`` is rclpy's ``qos_profile_sensor_data`` (best effort, depth 5), as lidar
     drivers use; ``transient_local`` keeps the last message for late subscribers, as tf2's
-    static broadcaster does; ``reliable`` is the ROS default (depth 10).
+    static broadcaster does; ``reliable`` is the ROS default (depth 10). ``reliability``
+    (``best_effort`` or ``reliable``) overrides the table's (the ``scan_reliability``
+    parameter).
     """
     offered = spec.qos_profile
+    reliability = reliability or offered.reliability
     return QoSProfile(
         depth=offered.depth,
-        reliability=ReliabilityPolicy.BEST_EFFORT if offered.reliability == "best_effort"
+        reliability=ReliabilityPolicy.BEST_EFFORT if reliability == "best_effort"
         else ReliabilityPolicy.RELIABLE,
         durability=DurabilityPolicy.TRANSIENT_LOCAL if offered.durability == "transient_local"
         else DurabilityPolicy.VOLATILE)
@@ -186,6 +190,10 @@ class VirtualRobotNode(Node):
             ``node_kwargs`` puts them under ``/alice``.
         publish_clock: publish the robot's ``/clock`` (always absolute: what ``use_sim_time``
             nodes read); False for a class's robots, whose one ``/clock`` the class publishes.
+        clock_after: with ``own_timer=False``, how a tick's ``/clock`` is published after the
+            tick's other messages (``websim serve --ros``: the event loop's ``call_soon``), so
+            that a node on sim time has a tick's /odom and /scan before its timers see the
+            tick's time; None publishes it in the robot's order (first).
         **node_kwargs: passed to ``rclpy.node.Node`` (e.g. ``context``).
 
     Raises:
@@ -195,6 +203,7 @@ class VirtualRobotNode(Node):
     def __init__(self, robot: VirtualRobot | None = None, *, access: RobotAccess | None = None,
                  own_timer: bool = True, ignore_cmd_vel_from: str | None = None,
                  frame_prefix: str = "", publish_clock: bool = True,
+                 clock_after: Callable[[Callable[[], None]], object] | None = None,
                  **node_kwargs: Any) -> None:
         super().__init__(NODE_BASENAME, **node_kwargs)
         self._frame_prefix = frame_prefix
@@ -208,6 +217,12 @@ class VirtualRobotNode(Node):
         self._robot = self.robot
         self._declare_robot_parameters()
         self._cmd_vel_stamped = bool(_declare(self, parameter_spec("cmd_vel_stamped")))
+        scan_reliability = str(_declare(self, parameter_spec("scan_reliability")))
+        self._clock_after = clock_after
+        self.publish_hook: Callable[[str, Callable[[], None]], None] | None = None
+        """With ``own_timer=False``: given each tapped message's topic and a function that
+        publishes it, publishes it when it chooses (``websim grade``'s lock step hands a
+        tick's messages to the controller one at a time); None: at once."""
 
         self._robot_publishers: dict[str, Any] = {}
         self._classes: dict[str, Any] = {}
@@ -222,7 +237,8 @@ class VirtualRobotNode(Node):
                 raise
             self._classes[spec.name] = cls
             self._robot_publishers[spec.name] = self.create_publisher(
-                cls, spec.name if spec is CLOCK else relative(spec.name), qos_profile(spec))
+                cls, spec.name if spec is CLOCK else relative(spec.name),
+                qos_profile(spec, scan_reliability if spec is SCAN else None))
         if not any(name in self._robot_publishers for name in ("/tf", "/tf_static")):
             self.get_logger().warning(TF_MISSING_WARNING)
 
@@ -272,7 +288,8 @@ class VirtualRobotNode(Node):
         noise = NoiseParams(**{
             spec.name: float(_declare(self, spec, float(getattr(defaults, spec.name))))
             for spec in _NOISE_PARAMETERS})
-        sim = Simulation(world, platform.robot, seed=seed, lidar=platform.lidar, noise=noise)
+        sim = Simulation(world, platform.robot, seed=seed,
+                         lidar=world.lidar_over(platform.lidar), noise=noise)
         clock = SimClock(TICK_PERIOD_S) if self._use_sim_time else WallClock()
         return VirtualRobot(sim, clock=clock,
                             localization=None if localization == WORLD_LOCALIZATION
@@ -369,10 +386,20 @@ class VirtualRobotNode(Node):
         publisher = self._robot_publishers.get(topic)
         return 0 if publisher is None else int(publisher.get_subscription_count())
 
+    def robot_publishers(self) -> dict[str, Any]:
+        """The node's publisher of each topic of the robot it publishes, by topic name."""
+        return dict(self._robot_publishers)
+
     def _publish_tapped(self, direction: str, topic: str, type_name: str, msg: Message,
                         sim_time_s: float) -> None:
         """The robot's tap: publish what it publishes (what it accepts came from a client)."""
-        if direction == OUT:
+        if direction != OUT:
+            return
+        if self.publish_hook is not None:
+            self.publish_hook(topic, lambda: self._publish_one(topic, msg))
+        elif topic == CLOCK.name and self._clock_after is not None:
+            self._clock_after(lambda: self._publish_one(topic, msg))
+        else:
             self._publish_one(topic, msg)
 
     def _publish_latched(self, publication: Publication) -> None:

@@ -71,7 +71,7 @@ def test_a_submission_file_is_checked(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"expected only .command: \.\.\.."):
         submission_command(tmp_path)
     (tmp_path / SUBMISSION_FILE).write_text("command: python3 a.py\nros: true\n")
-    assert submission_declaration(tmp_path) == (["python3", "a.py"], True)
+    assert submission_declaration(tmp_path) == (["python3", "a.py"], True, ())
     (tmp_path / SUBMISSION_FILE).write_text("command: python3 a.py\nros: yes please\n")
     with pytest.raises(ConfigError, match="ros: expected true or false"):
         submission_command(tmp_path)

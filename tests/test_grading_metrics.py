@@ -22,7 +22,7 @@ from grading.metrics import (
     wall_following,
 )
 from grading.shortest_path import shortest_path_m
-from grading.trajectory import Sample, check_trajectory
+from grading.trajectory import Sample, check_trajectory, circular_mean_rad
 from physics import World, load_world
 from physics.world import world_from_dict
 
@@ -121,6 +121,35 @@ def test_turning_the_wrong_way_is_not_overshoot() -> None:
     result = heading_step(track(t, yaw=yaw), params)
     assert result.figures["overshoot"] == 0.0
     assert result.value is None and "never settled" in result.reason
+
+
+def test_the_steady_state_error_is_a_circular_mean_across_the_wrap() -> None:
+    # Turned the wrong way to the opposite heading (-pi/2 for +pi/2) and wobbling 0.07 rad
+    # about it: the error is pi -+ 0.07, wrapped +3.0716 or -3.0716 rad. The last 0.5 s (six
+    # samples) hold four of one and two of the other: their arithmetic mean is 1.0239 rad,
+    # a third of the truth (a run that straddled the wrap evenly read 0 rad); the circular
+    # mean is pi - atan(tan(0.07) / 3) = 3.11826 rad: nearly half a turn off.
+    t = ticks(5.0, 0.1)
+    near = [-STEP_RAD + 0.07] * len(t)
+    near[0] = 0.0
+    for k in range(1, 10):
+        near[k] = -STEP_RAD * k / 10
+    for k, sign in zip(range(45, 51), (1, -1, 1, -1, 1, 1), strict=True):
+        near[k] = -STEP_RAD + sign * 0.07
+    result = heading_step(track(t, yaw=near), HeadingStepParams(setpoints=((0.0, STEP_RAD),)))
+    step = result.figures["steps"][0]
+    assert step["final_error_rad"] == pytest.approx(math.pi - 0.07)
+    assert step["steady_state_error_rad"] == pytest.approx(math.pi - math.atan(math.tan(0.07)
+                                                                              / 3))
+    assert step["steady_state_error_rad"] > 3.1 and not result.passed
+
+
+def test_the_circular_mean_of_angles_close_together_is_their_mean() -> None:
+    assert circular_mean_rad([0.1, 0.2, 0.3]) == pytest.approx(0.2, abs=1e-15)
+    assert circular_mean_rad([3.0, -3.0]) == pytest.approx(math.pi)  # not 0
+    assert circular_mean_rad([-0.01, 0.01, 0.03]) == pytest.approx(0.01, abs=1e-7)
+    with pytest.raises(ValueError, match="no angles"):
+        circular_mean_rad([])
 
 
 # --- wall following ---------------------------------------------------------------------------

@@ -10,7 +10,8 @@ import pytest
 from grading import controller_environment, load_scenario, load_suite
 from grading.metrics import HeadingStepParams, WallFollowingParams
 from grading.scenario import SCENARIOS_DIR
-from physics import ConfigError, RobotParams
+from physics import ConfigError, RobotParams, Simulation, load_world
+from physics.params import LidarParams
 
 SHIPPED = sorted(path.stem for path in SCENARIOS_DIR.glob("*.yaml"))
 
@@ -239,3 +240,63 @@ def test_an_oversized_file_is_refused_before_it_is_parsed(tmp_path: Path) -> Non
     path = write(tmp_path, HEADING + "#" * (1 << 20))
     with pytest.raises(ConfigError, match=r"scenario file longer than 1048576 bytes"):
         load_scenario(path)
+
+
+SCAN_TURN = """\
+world: {world}
+duration_s: 5
+lidar: {{angle_min_rad: {angle}}}
+parameters:
+  setpoint_rad: 1.0
+metrics:
+  - kind: heading_step
+"""
+
+
+@pytest.mark.parametrize("angle, expected", [("-pi", -math.pi), ("pi/2", math.pi / 2),
+                                             ("-pi/2", -math.pi / 2), ("0", 0.0)])
+def test_a_scenario_sets_the_scans_angles_and_the_beams_follow(
+        tmp_path: Path, angle: str, expected: float) -> None:
+    path = tmp_path / "turn.yaml"
+    path.write_text(SCAN_TURN.format(world="empty", angle=angle))
+    lidar = load_scenario(path).lidar
+    n = lidar.num_rays
+    assert lidar.angle_min_rad == expected
+    assert lidar.angle_increment_rad == 2 * math.pi / n  # a full turn, as the default
+    assert lidar.angle_max_rad == lidar.angle_min_rad + (n - 1) * lidar.angle_increment_rad
+    scan = Simulation(load_world("empty"), lidar=lidar).scan()
+    assert (scan.angle_min, scan.angle_max, scan.angle_increment) == \
+        (lidar.angle_min_rad, lidar.angle_max_rad, lidar.angle_increment_rad)
+    # the beam at angle 0 (ahead: index 180 for -pi, 0 for 0) reads the arena's east wall
+    ahead = round(-expected / lidar.angle_increment_rad) % n
+    beam_rad = lidar.angle_min_rad + ahead * lidar.angle_increment_rad
+    assert math.remainder(beam_rad, 2 * math.pi) == pytest.approx(0.0, abs=1e-12)
+    assert scan.ranges[ahead] == pytest.approx(3.0, abs=1e-9)
+    assert ahead == {"-pi": 180, "pi/2": 270, "-pi/2": 90, "0": 0}[angle]
+
+
+def test_the_shipped_scan_is_unchanged_and_a_world_may_set_its_angles(tmp_path: Path) -> None:
+    shipped = load_scenario("heading_pid").lidar
+    assert shipped == LidarParams() and shipped.angle_min_rad == 0.0
+    assert shipped.angle_max_rad == 359 * (2 * math.pi / 360)  # 0..2pi less one beam
+    world = tmp_path / "centred.yaml"
+    world.write_text("walls: [[2.0, -5.0, 2.0, 5.0]]\nlidar: {angle_min_rad: -pi}\n")
+    assert load_world(world).lidar_over(LidarParams()).angle_min_rad == -math.pi
+    path = tmp_path / "turn.yaml"
+    path.write_text(SCAN_TURN.format(world="centred.yaml", angle="-pi/2"))
+    assert load_scenario(path).lidar.angle_min_rad == -math.pi / 2  # the scenario's wins
+    path.write_text(SCAN_TURN.format(world="centred.yaml", angle="-pi").replace(
+        "lidar: {angle_min_rad: -pi}\n", ""))
+    assert load_scenario(path).lidar.angle_min_rad == -math.pi  # the world's
+
+
+@pytest.mark.parametrize("angle, message", [
+    ("tau", "a multiple of pi"), ("7.0", "angle_min_rad"), ("2pi", "a multiple of pi"),
+    ("[1]", "expected a number")])
+def test_a_bad_scan_angle_is_refused_with_its_line(tmp_path: Path, angle: str,
+                                                   message: str) -> None:
+    path = tmp_path / "turn.yaml"
+    path.write_text(SCAN_TURN.format(world="empty", angle=angle))
+    with pytest.raises(ConfigError, match=message) as error:
+        load_scenario(path)
+    assert "turn.yaml:3: lidar" in str(error.value)

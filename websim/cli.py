@@ -174,7 +174,8 @@ def make_simulation(args: argparse.Namespace) -> Simulation:
     platform = load_params(args.params)
     world = load_world(args.world)
     return Simulation(world, platform.robot, mode=args.mode, seed=args.seed,
-                      lidar=platform.lidar, noise=world.noise_over(platform.noise))
+                      lidar=world.lidar_over(platform.lidar),
+                      noise=world.noise_over(platform.noise))
 
 
 def parse_speed(text: str) -> float:

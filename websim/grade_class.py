@@ -5,6 +5,7 @@ command in ``websim-submission.yaml``::
 
     command: python3 wall_follower.py          # or a list: [python3, wall_follower.py]
     ros: true                                  # optional: an rclpy node (websim grade --ros)
+    ros_parameters: {kp: WEBSIM_KP}            # optional, with ros: -p kp:=<WEBSIM_KP's value>
 
 Submissions are graded in parallel (up to the machine's cores, ``--jobs``), each as
 ``websim grade`` grades one (its own sandbox and simulator per run), into ``OUT/STUDENT/``.
@@ -21,6 +22,7 @@ import dataclasses
 import html
 import json
 import os
+import re
 import shlex
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -34,7 +36,12 @@ from physics import ConfigError
 from websim.grade_run import GradeOptions, grade_submission
 
 SUBMISSION_FILE = "websim-submission.yaml"
-SUBMISSION_KEYS = ("command", "ros")
+SUBMISSION_KEYS = ("command", "ros", "ros_parameters")
+MAX_ROS_PARAMETERS = 32
+ROS_PARAMETER_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.]{0,99}\Z")
+"""A ROS parameter's name (dots for nested names)."""
+SCENARIO_VARIABLE = re.compile(r"WEBSIM_[A-Z0-9_]{1,80}\Z")
+"""What ``ros_parameters`` maps a parameter to: a scenario's variable (``WEBSIM_KP``)."""
 MAX_COMMAND_ARGS = 64
 MAX_SUBMISSION_FILE_BYTES = 64 * 1024
 
@@ -45,10 +52,13 @@ class Declared(NamedTuple):
     Attributes:
         command: the controller's command line, as words.
         ros: ``ros: true``: the controller is an rclpy node, graded as with ``--ros``.
+        ros_parameters: ``ros_parameters``: (ROS parameter, scenario variable) pairs: the
+            node gets ``-p NAME:=VALUE`` with the variable's value in each scenario.
     """
 
     command: list[str]
     ros: bool
+    ros_parameters: tuple[tuple[str, str], ...] = ()
 
 
 def submission_command(folder: Path) -> list[str]:
@@ -93,7 +103,30 @@ def submission_declaration(folder: Path) -> Declared:
             or not all(isinstance(arg, str) and arg for arg in command)):
         raise ConfigError(f"{path.name}: command: expected a command line or a list of "
                           f"words, got {command!r:.80}")
-    return Declared(command, ros)
+    return Declared(command, ros, _ros_parameters(path.name, document, ros))
+
+
+def _ros_parameters(name: str, document: dict[str, Any],
+                    ros: bool) -> tuple[tuple[str, str], ...]:
+    """``ros_parameters: {kp: WEBSIM_KP}``, checked: ROS names to scenario variables."""
+    mapping = document.get("ros_parameters")
+    if mapping is None:
+        return ()
+    if not ros:
+        raise ConfigError(f"{name}: ros_parameters: needs 'ros: true' (an rclpy node)")
+    if not isinstance(mapping, dict) or len(mapping) > MAX_ROS_PARAMETERS:
+        raise ConfigError(f"{name}: ros_parameters: expected at most {MAX_ROS_PARAMETERS} "
+                          f"'parameter: WEBSIM_NAME' entries, got {mapping!r:.80}")
+    pairs = []
+    for parameter, variable in mapping.items():
+        if not isinstance(parameter, str) or not ROS_PARAMETER_NAME.match(parameter):
+            raise ConfigError(f"{name}: ros_parameters: {parameter!r:.40} is not a ROS "
+                              "parameter name")
+        if not isinstance(variable, str) or not SCENARIO_VARIABLE.match(variable):
+            raise ConfigError(f"{name}: ros_parameters: {parameter}: expected a scenario's "
+                              f"variable (WEBSIM_NAME, e.g. WEBSIM_KP), got {variable!r:.40}")
+        pairs.append((parameter, variable))
+    return tuple(pairs)
 
 
 def grade_class(suite_file: str | Path, suite: Suite, submissions: Path, out: Path,
@@ -109,10 +142,12 @@ def grade_class(suite_file: str | Path, suite: Suite, submissions: Path, out: Pa
     def one(folder: Path) -> dict[str, Any]:
         target = out / folder.name
         try:
-            command, ros = submission_declaration(folder)
+            declared = submission_declaration(folder)
         except ConfigError as error:
             return _zero_row(folder.name, suite, str(error))
-        graded = dataclasses.replace(options, ros=options.ros or ros)
+        command = declared.command
+        graded = dataclasses.replace(options, ros=options.ros or declared.ros,
+                                     ros_parameters=declared.ros_parameters)
         try:
             summary = grade_submission(suite_file, command, folder, target, graded, quiet=True)
         except Exception as error:  # a grader fault for one student must not stop the class

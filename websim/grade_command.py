@@ -58,10 +58,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="deterministic (default): on sim time, the simulation waits for "
                              "the controller's command each time it is due; wall-clock: at 1x, "
                              "for any program")
-    parser.add_argument("--step-on", choices=tuple(STEP_ON), default="odom",
-                        help="deterministic mode: the controller answers each /odom (default), "
-                             "each /scan, or at the scenario's controller_rate_hz (a timer "
-                             "on sim time)")
+    parser.add_argument("--step-on", choices=tuple(STEP_ON), default="auto",
+                        help="deterministic mode: auto (default): what the controller "
+                             "subscribes to (an rclpy node: every tick, once its executor "
+                             "handled it); or a /cmd_vel after each /odom, each /scan, or at "
+                             "the scenario's controller_rate_hz")
     parser.add_argument("--runs", type=_positive_int, default=1, metavar="N",
                         help="runs per scenario: the score is their median, their spread is "
                              "printed (default 1)")
@@ -124,8 +125,10 @@ def run(args: argparse.Namespace) -> int:
                                   "heading_pid.yaml -- python3 controller.py (or declare it "
                                   f"in the submission's {SUBMISSION_FILE})")
             try:
-                command, ros = submission_declaration(args.submission)
-                options = dataclasses.replace(options, ros=options.ros or ros)
+                declared = submission_declaration(args.submission)
+                command = declared.command
+                options = dataclasses.replace(options, ros=options.ros or declared.ros,
+                                              ros_parameters=declared.ros_parameters)
             except ConfigError as error:
                 if args.gradescope is None:
                     raise

@@ -10,7 +10,8 @@ For each scenario of the suite (a scenario file is a suite of one), and each of 
    ``WEBSIM_URL`` and the scenario's ``WEBSIM_<NAME>``, until it exits or the run ends;
 3. the score, from the recording's ground truth (``grading.recorded``) by the scenario's
    metrics (``grading.evaluate``); a run that did not run its course (the controller never
-   subscribed, stopped answering, or ended first) scores 0 with the reason.
+   subscribed, stopped answering, or crashed first) scores 0 with the reason; a controller
+   that exits with code 0 ends the run, which is scored until its last command.
 
 Each run writes ``report.json`` in ``DIR/SCENARIO/`` (``DIR/SCENARIO/run-K/`` with
 ``--runs``), prints one line per scenario, and the suite's total; the exit code is 0 when
@@ -34,9 +35,11 @@ from grading import Scenario, controller_environment, evaluate, load_suite
 from grading.recorded import bag_folder, trajectory_from_bag
 from grading.report_page import report_html
 from grading.scenario import resolve_scenario_path
-from grading.trajectory import Sample
+from grading.trajectory import Sample, until
+from physics import ConfigError
 from websim.grade_server import (
     MAX_MISSED_STEPS,
+    PROBE_S,
     RECORDING_DIR,
     RUN_FILE,
     STARTUP_TIMEOUT_S,
@@ -84,15 +87,36 @@ class GradeOptions:
             the controller gets ``ROS_DOMAIN_ID`` and ``ROS_ARGS``.
         params: a parameter file whose robot the runs use (``--params``, e.g. ``websim
             fit``'s); None: each scenario's own.
+        ros_parameters: (ROS parameter, scenario variable) pairs: with ``ros``, the node
+            gets ``-p NAME:=VALUE`` after ``ROS_ARGS``, the variable's value in each scenario
+            (``websim-submission.yaml``'s ``ros_parameters``).
     """
 
     mode: str = "deterministic"
-    step_on: str = "odom"
+    step_on: str = "auto"
     sandboxed: bool = True
     runs: int = 1
     startup_timeout_s: float = STARTUP_TIMEOUT_S
     ros: bool = False
     params: str | None = None
+    ros_parameters: tuple[tuple[str, str], ...] = ()
+
+
+def ros_arguments(scenario: Scenario, options: GradeOptions) -> list[str]:
+    """What ``--ros`` appends to the controller's command: sim time and its parameters.
+
+    Raises:
+        ConfigError: a parameter is mapped to a variable the scenario does not set.
+    """
+    told = controller_environment(scenario)
+    arguments = list(ROS_ARGS)
+    for parameter, variable in options.ros_parameters:
+        if variable not in told:
+            known = ", ".join(sorted(told)) or "none"
+            raise ConfigError(f"ros_parameters: {parameter}: {variable} is not set in "
+                              f"scenario {scenario.name} (it sets: {known})")
+        arguments += ["-p", f"{parameter}:={told[variable]}"]
+    return arguments
 
 
 def ros_environment(sandboxed: bool) -> dict[str, str]:
@@ -187,7 +211,11 @@ def grade_run(suite_path: Path, scenario: Scenario, command: Sequence[str],
         ros_env = ros_environment(options.sandboxed) if options.ros else {}
         if options.ros:
             argv.append("--ros")
-            command = [*command, *ROS_ARGS]
+            try:
+                command = [*command, *ros_arguments(scenario, options)]
+            except ConfigError as error:
+                return _write(out, {"scenario": scenario.name, "mode": options.mode,
+                                    "run": None, "controller": None, **_zero(str(error))})
         try:
             sandbox.start_server(argv, env={**os.environ, **ros_env})
         except SimulatorStartError as error:
@@ -253,19 +281,49 @@ def score_run(scenario: Scenario, out: Path, options: GradeOptions, *,
     except (FileNotFoundError, OSError, ValueError) as error:
         return {**base, **_zero(f"the recording cannot be read: {error}")}, []
     base["recording"] = str(bag)
+    ended_by = run_end["ended_by"]
+    exited = ended_by == "stopped" and exited_cleanly(controller)
+    last_s = run_end.get("last_command_s")
+    if exited and last_s is not None and trajectory and trajectory[0].t_s <= last_s:
+        trajectory = list(until(trajectory, last_s))  # a clean exit ends the run
     result = evaluate(scenario, trajectory)
     graded = result.to_json()
     graded.pop("name", None)
-    ended_by = run_end["ended_by"]
+    notes = run_notes(run_end)
+    if notes:
+        graded["reason"] = "; ".join([graded["reason"], *notes])
     if ended_by in ("duration", "end_point"):
+        return {**base, **graded}, trajectory
+    if exited:
+        when = "before its first command" if last_s is None else \
+            f"after its last command at t = {last_s:.2f} s"
+        graded["reason"] = (f"{graded['reason']} (the controller exited with code 0 {when}, "
+                            f"of {scenario.duration_s:g} s: scored on the run until then)")
         return {**base, **graded}, trajectory
     if ended_by == "stopped":
         why = (f"the controller ended before the run did (at t = {run_end['sim_time_s']:.2f} "
                f"s of {scenario.duration_s:g} s): {controller_reason}")
     else:
-        why = run_end["reason"]
+        why = "; ".join([run_end["reason"], *notes])
     return {**base, **graded, "score": 0.0, "passed": False, "reason": why,
             "score_if_completed": graded["score"]}, trajectory
+
+
+def exited_cleanly(controller: dict[str, Any]) -> bool:
+    """Whether the controller ended the run itself, with exit code 0."""
+    return controller.get("ended_by") == "exit" and controller.get("exit_code") == 0
+
+
+def run_notes(run_end: dict[str, Any]) -> list[str]:
+    """What the report must say about how the controller took part (``run.json``)."""
+    notes = list(run_end.get("incompatible_qos", []))
+    if run_end.get("wall_paced"):
+        notes.append(
+            f"not deterministic: the controller published {run_end['probe_commands']} "
+            f"/cmd_vel in {PROBE_S:g} s while the simulator sent it nothing (it paces itself "
+            f"by the wall clock: time.sleep, a steady timer), so a re-grade can differ: grade "
+            f"it with --mode wall-clock")
+    return notes
 
 
 def asdict_controller(result: Any) -> dict[str, Any]:

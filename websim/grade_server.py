@@ -5,21 +5,24 @@ namespace) as ``python -m websim.grade_server SUITE --scenario NAME --out DIR ..
 ``websim serve`` with one robot, built from the scenario (world, start, mode, payload, seed),
 recording to ``DIR/recording`` (``--record``), with five things of its own:
 
-- **the scenario's clock**: nothing ticks until the controller subscribes to its trigger
-  topic (``/odom``, or what ``--step-on`` names), at most ``STARTUP_TIMEOUT_S``; then the
-  run lasts ``duration_s`` of sim time, or until the robot comes within the scenario's
-  ``end``, and the server stops itself;
-- **its timed changes** (payload, mode) at the first tick at or after their time;
+- **the scenario's clock**: sim time from 0 (``/clock`` starts at 0, as Gazebo's does);
+  nothing ticks until the controller is ready (``LockStep``: subscribed to what it is stepped
+  on, ``--step-on auto`` by default), at most ``STARTUP_TIMEOUT_S``; then the run lasts
+  ``duration_s`` of sim time, or until the robot comes within the scenario's ``end``, and
+  the server stops itself;
+- **its timed changes** (payload, mode) at the first tick at or after their time, and its
+  LiDAR (``Scenario.lidar``: the scan's angles a world or a scenario sets);
 - **lock step** (``--mode deterministic``): on sim time at ``--speed max``, and after each
-  tick at which the controller is due (``LockStep``) the next tick waits for its /cmd_vel,
-  so the run depends only on the controller's answers and the seed; in ``wall-clock`` mode
-  it runs at 1x and waits for nobody;
+  tick the next waits for the controller (``LockStep``): for its /cmd_vel after each message
+  of what it answers (rosbridge), or until its node's executor has handled each of the
+  tick's messages (``--ros``: ``websim.grade_graph``), so the run depends only on the
+  controller's answers and the seed; in ``wall-clock`` mode it runs at 1x and waits for
+  nobody;
 - **the ROS graph** (``--ros``, for an rclpy controller): ``websim serve --ros``'s nodes in
-  this process (``websim.ros_runtime``); the controller's subscription to the trigger topic
-  on the graph starts the run as a rosbridge client's does (``graph_subscribed``: once the
-  robot's publisher has matched it, so the first message reaches it), and its
-  /cmd_vel from the graph answers the lock step as a rosbridge client's does (the robot's
-  tap sees both);
+  this process (``websim.ros_runtime``), ``/scan`` offered reliable
+  (``GRADE_NODE_PARAMETERS``); the controller's node spinning with its subscriptions matched
+  starts the run, its /cmd_vel from the graph reaches the robot's tap as a rosbridge
+  client's does, and a subscription the robot cannot serve is named (incompatible QoS);
 - **no changes from the controller**: ``/reset_simulation`` is refused; parameters and pause
   need the admin token, which only this process knows (the controller's environment does not
   hold it).
@@ -38,7 +41,7 @@ import os
 import signal
 import sys
 from collections.abc import Callable, Collection, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +50,7 @@ from grading import Scenario, load_suite
 from physics import TICK_PERIOD_S, ConfigError, RobotParams, Simulation, load_params
 from physics.params import NoiseParams
 from ros_nodes.recording import Recorder
-from ros_nodes.robot_interface import RESET_SERVICE
+from ros_nodes.robot_interface import CLOCK, PUBLISHED_TOPICS, RESET_SERVICE, SCAN
 from ros_nodes.tap import IN, OUT
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.clock import MAX_SPEED, SPEED_MAX, SimClock
@@ -59,15 +62,33 @@ from websim import sites
 MODES = ("deterministic", "wall-clock")
 """How a graded run keeps time: in lock step with the controller on sim time, or at 1x."""
 
-STEP_ON = {"odom": "/odom", "scan": "/scan", "rate": "/clock"}
-"""``--step-on``: what the controller answers (deterministic mode waits for its command after
-each): every ``/odom`` (20 Hz), every ``/scan`` (10 Hz), or the scenario's
-``controller_rate_hz`` on ``/clock`` (a timer on sim time)."""
+STEP_ON: dict[str, str | None] = {"auto": None, "odom": "/odom", "scan": "/scan",
+                                  "rate": "/clock"}
+"""``--step-on``: when deterministic mode waits for the controller. ``auto`` (the default):
+an rclpy controller (``--ros``) every tick, until its executor has handled the tick
+(``websim.grade_graph``: a timer node answers when its timer says); a rosbridge controller
+after each message of what it subscribes to (``AUTO_TOPICS``: every tick for ``/odom`` and
+its kind, every ``/scan``, or ``controller_rate_hz`` of ``/clock``). Or by hand: after each
+``/odom`` (20 Hz), each ``/scan`` (10 Hz), or the scenario's ``controller_rate_hz`` on
+``/clock``, waiting for a ``/cmd_vel`` after each."""
+
+TICK_TOPICS = tuple(spec.name for spec in PUBLISHED_TOPICS
+                    if spec.every_ticks == 1 and spec is not CLOCK)
+"""The robot's topics published at every tick (``/odom``, ``/tf``, ``/ground_truth``...):
+a controller that answers one of them answers at every tick, as one on ``/odom`` does."""
+
+AUTO_TOPICS = (*TICK_TOPICS, SCAN.name, CLOCK.name)
+"""What ``--step-on auto`` looks for among a rosbridge controller's subscriptions."""
 
 STARTUP_TIMEOUT_S = 60.0
 """How long (wall time) the controller may take to connect and subscribe before the run
 starts; beyond it the run ends unstarted (an interpreter's start on a loaded machine takes a
 few seconds)."""
+
+SETTLE_S = 0.25
+"""``--step-on auto``: once a rosbridge controller subscribed to a topic it may step on, the
+run starts when its subscriptions have not changed for this long (wall time, s): roslibpy and
+roslibjs send a controller's subscriptions one after the other, within milliseconds."""
 
 STEP_TIMEOUT_S = 5.0
 """Deterministic mode: how long (wall time) a tick waits for the controller's command."""
@@ -76,8 +97,25 @@ MAX_MISSED_STEPS = 3
 """Deterministic mode: after this many commands not given in time the run ends: the controller
 does not answer each observation, so the run could not be repeated exactly."""
 
+PROBE_AT_STEP = 20
+"""Deterministic mode: at this step (one second of sim time at 20 Hz) the next tick is held
+for ``PROBE_S`` of wall time, while the controller is sent nothing new."""
+
+PROBE_S = 0.3
+"""How long the probe holds the run (wall time, s)."""
+
+WALL_PACED_COMMANDS = 2
+"""Commands a controller publishes during the probe, having been sent nothing new, that show
+it is paced by the wall clock (a ``time.sleep`` loop, a steady timer), not by what it is sent:
+a controller tied to its messages publishes nothing then, or its one late second answer."""
+
 RUN_FILE = "run.json"
 RECORDING_DIR = "recording"
+
+GRADE_NODE_PARAMETERS = {"scan_reliability": "reliable"}
+"""The robot node's parameters in a graded run (``--ros``): ``/scan`` reliable, which both a
+best-effort subscriber (sensor data, as rplidar's examples) and a RELIABLE one (the Neato
+driver's, many a course's) receive."""
 
 
 @dataclass
@@ -93,13 +131,22 @@ class RunEnd:
         sim_time_s: sim time reached (s).
         ticks: ticks run.
         epoch_s: the stamp of sim time 0 (s): a message's time in the run is its stamp
-            minus this.
+            minus this (0: in a graded run ``/clock`` starts at 0, as Gazebo's does).
         mode: ``deterministic`` or ``wall-clock``.
-        step_on: what the controller was stepped on (deterministic).
+        step_on: what deterministic mode waited for: ``odom``, ``scan``, ``rate`` (a
+            ``/cmd_vel`` after each), or ``handshake`` (an rclpy controller's executor, every
+            tick); in wall-clock mode, ``--step-on`` as given.
         commands: /cmd_vel messages the robot accepted.
-        steps_waited: ticks that waited for the controller's command (deterministic).
+        steps_waited: ticks that waited for the controller (deterministic).
         missed_steps: of which it did not answer within ``STEP_TIMEOUT_S``.
         first_miss_s: sim time of the first missed step, or None.
+        subscribed: the robot's topics the controller subscribed to at the start.
+        incompatible_qos: its subscriptions the robot could not serve, one line each.
+        last_command_s: sim time of the tick at which the last /cmd_vel arrived, or None.
+        probe_commands: commands published during the probe (deterministic; None if the
+            run ended before it).
+        wall_paced: those show a controller paced by the wall clock, not by what it is sent:
+            deterministic mode cannot repeat its run (``--mode wall-clock``).
     """
 
     ended_by: str
@@ -113,6 +160,11 @@ class RunEnd:
     steps_waited: int
     missed_steps: int
     first_miss_s: float | None
+    subscribed: list[str] = field(default_factory=list)
+    incompatible_qos: list[str] = field(default_factory=list)
+    last_command_s: float | None = None
+    probe_commands: int | None = None
+    wall_paced: bool = False
 
 
 GRAPH_TOPICS = ("/odom", "/scan", "/clock")
@@ -124,18 +176,26 @@ subscribes ``/clock`` at its start)."""
 class LockStep:
     """The run's pace and end: the schedule's gate and tick listener, the robot's tap.
 
-    Before the first tick it waits for the controller to subscribe to the trigger topic (in
-    wall-clock mode: to connect), at most ``startup_timeout_s``. Each
-    time the robot publishes that topic (every ``every``-th time, for ``rate``) the controller
-    is due; in deterministic mode the next tick waits until a /cmd_vel arrives after it, at
-    most ``STEP_TIMEOUT_S``. Every tick it applies the scenario's timed changes and checks
-    whether the run is over.
+    Before the first tick it waits for the controller (at most ``startup_timeout_s``): in
+    wall-clock mode to connect; in deterministic mode to subscribe to its trigger topic, or
+    with ``auto`` to settle its subscriptions (rosbridge) or to spin its node with every
+    subscription matched (``graph``). Then, in deterministic mode, each tick waits before
+    the next: with a trigger, for a /cmd_vel after each time the robot published it (every
+    ``every``-th time, for ``rate``), at most ``STEP_TIMEOUT_S``; with a graph, for the
+    controller's executor to have handled the tick (``ControllerGraph.deliver``). Once,
+    at ``PROBE_AT_STEP``, it holds the run to see whether the controller publishes unasked.
+    Every tick it applies the scenario's timed changes and checks whether the run is over.
+
+    Args:
+        graph: ``--ros`` with ``--step-on auto``: returns the controller's graph
+            (``websim.grade_graph.ControllerGraph``) once the ROS graph runs, else None.
     """
 
     def __init__(self, scenario: Scenario, robot: VirtualRobot, clock: SimClock,
                  subscribed: Callable[[], Collection[str]], connected: Callable[[], bool], *,
                  mode: str, step_on: str, out: Path,
-                 startup_timeout_s: float = STARTUP_TIMEOUT_S) -> None:
+                 startup_timeout_s: float = STARTUP_TIMEOUT_S,
+                 graph: Callable[[], Any] | None = None) -> None:
         self.scenario, self.robot, self.clock = scenario, robot, clock
         self.subscribed, self.connected = subscribed, connected
         self.startup_timeout_s = startup_timeout_s
@@ -143,6 +203,8 @@ class LockStep:
         self.mode, self.step_on = mode, step_on
         self.trigger = STEP_ON[step_on]
         self.every = scenario.controller_period_ticks if step_on == "rate" else 1
+        self.graph_factory = graph if self.deterministic and step_on == "auto" else None
+        self.graph: Any = None
         self.out = out
         self.epoch_s = clock.stamp_s()
         self.ticks_total = math.floor(scenario.duration_s / TICK_PERIOD_S + 1e-9)
@@ -153,6 +215,15 @@ class LockStep:
         self.answered = asyncio.Event()
         self.triggers = self.commands = self.steps_waited = self.missed = 0
         self.first_miss_s: float | None = None
+        self.subscribed_at_start: list[str] = []
+        self.incompatible_qos: list[str] = []
+        self.scan_fallback = False
+        """auto: it subscribes /scan and a per-tick topic: stepped on every tick until it
+        leaves a tick without /scan unanswered, then on /scan."""
+        self.last_command_tick: int | None = None
+        self.probe_commands: int | None = None
+        self._tick_topics: set[str] = set()
+        self._last_tick_topics: set[str] = set()
         robot.tap.add(self.on_message)
 
     @property
@@ -160,22 +231,33 @@ class LockStep:
         """Sim time since the start (s)."""
         return self.clock.ticks * TICK_PERIOD_S
 
+    @property
+    def stepped_on(self) -> str:
+        """What the run is stepped on, as ``run.json`` says it."""
+        if self.graph is not None:
+            return "handshake"
+        names = {topic: name for name, topic in STEP_ON.items() if topic is not None}
+        return names.get(self.trigger or "", self.step_on)
+
     def on_message(self, direction: str, topic: str, type_name: str, msg: Message,
                    sim_time_s: float) -> None:
         """The tap: the controller is due after its trigger; its /cmd_vel answers."""
-        if direction == OUT and topic == self.trigger:
-            if self.triggers % self.every == 0:
-                self.awaiting = True
-                self.answered.clear()
-            self.triggers += 1
+        if direction == OUT:
+            self._tick_topics.add(topic)
+            if topic == self.trigger:
+                if self.triggers % self.every == 0:
+                    self.awaiting = True
+                    self.answered.clear()
+                self.triggers += 1
         elif direction == IN and topic == "/cmd_vel":
             self.commands += 1
+            self.last_command_tick = self.clock.ticks
             if self.awaiting:
                 self.awaiting = False
                 self.answered.set()
 
     async def gate(self) -> None:
-        """Hold the next tick: until the start, for the controller's command, or for good.
+        """Hold the next tick: until the start, for the controller, or for good.
 
         For good once the run is over (the server is stopping).
         """
@@ -184,41 +266,138 @@ class LockStep:
         if not self.started:
             await self._wait_for_start()
             return
-        if not (self.deterministic and self.awaiting):
+        if not self.deterministic:
             return
+        if self.graph is not None:
+            await self._wait_for_handshake()
+        elif self.awaiting:
+            await self._wait_for_answer()
+        else:
+            return
+        if self.steps_waited == PROBE_AT_STEP and self.probe_commands is None:
+            before = self.commands
+            await asyncio.sleep(PROBE_S)
+            self.probe_commands = self.commands - before
+
+    async def _wait_for_answer(self) -> None:
         self.steps_waited += 1
         try:
             await asyncio.wait_for(self.answered.wait(), STEP_TIMEOUT_S)
         except asyncio.TimeoutError:
             self.awaiting = False
-            self.missed += 1
-            if self.first_miss_s is None:
-                self.first_miss_s = self.sim_time_s
-            if self.missed >= MAX_MISSED_STEPS:
-                self.finish("no_answer", (
-                    f"the controller did not answer {self.trigger} within {STEP_TIMEOUT_S:g} s "
-                    f"{self.missed} times (first at t = {self.first_miss_s:.2f} s of sim time): "
-                    f"deterministic mode needs a /cmd_vel after each {self.trigger}"
-                    + (f" (every {self.every} ticks)" if self.every > 1 else "")
-                    + "; grade it with --mode wall-clock, or --step-on scan|rate if it answers "
-                      "those"))
-                await asyncio.Event().wait()
+            if self.scan_fallback and SCAN.name not in self._last_tick_topics:
+                # it left a tick without /scan unanswered: it answers /scan (not counted)
+                self.trigger, self.scan_fallback = SCAN.name, False
+                self.steps_waited -= 1
+                return
+            await self._missed(
+                f"the controller did not answer {self.trigger} within {STEP_TIMEOUT_S:g} s",
+                f"deterministic mode needs a /cmd_vel after each {self.trigger}"
+                + (f" (every {self.every} ticks)" if self.every > 1 else "")
+                + "; grade it with --mode wall-clock"
+                + "".join(f", or --step-on {name} if it answers each {topic}"
+                          for name, topic in STEP_ON.items()
+                          if topic is not None and topic != self.trigger))
+
+    async def _wait_for_handshake(self) -> None:
+        self.steps_waited += 1
+        if not await self.graph.deliver(STEP_TIMEOUT_S):
+            await self._missed(
+                f"the controller's node ({', '.join(self.graph.active)}) did not answer the "
+                f"simulator's handshake within {STEP_TIMEOUT_S:g} s",
+                "its executor stopped spinning (a callback that blocks: input(), "
+                "time.sleep, a loop); grade it with --mode wall-clock if it paces itself")
+
+    async def _missed(self, what: str, advice: str) -> None:
+        self.missed += 1
+        if self.first_miss_s is None:
+            self.first_miss_s = self.sim_time_s
+        if self.missed >= MAX_MISSED_STEPS:
+            self.finish("no_answer", f"{what} {self.missed} times (first at t = "
+                                     f"{self.first_miss_s:.2f} s of sim time): {advice}")
+            await asyncio.Event().wait()
 
     async def _wait_for_start(self) -> None:
         loop = asyncio.get_running_loop()
         deadline = loop.time() + self.startup_timeout_s
-        wanted = f"subscribe to {self.trigger}" if self.deterministic else "connect"
-        while not (self.trigger in self.subscribed() if self.deterministic
-                   else self.connected()):
-            if loop.time() >= deadline:
-                self.finish("no_start", f"the controller did not {wanted} within "
-                                        f"{self.startup_timeout_s:g} s: the run never started")
-                await asyncio.Event().wait()
-            await asyncio.sleep(0.01)
+        if not self.deterministic:
+            await self._until(self.connected, deadline, "connect")
+        elif self.graph_factory is not None:
+            await self._wait_for_graph(deadline)
+        elif self.trigger is not None:
+            trigger = self.trigger
+            await self._until(lambda: trigger in self.subscribed(), deadline,
+                              f"subscribe to {trigger}")
+        else:
+            await self._wait_for_subscriptions(deadline)
+        if self.graph is None:
+            self.subscribed_at_start = sorted(set(self.subscribed()) & set(AUTO_TOPICS))
         self.started = True
+
+    async def _until(self, condition: Callable[[], bool], deadline: float, wanted: str) -> None:
+        loop = asyncio.get_running_loop()
+        while not condition():
+            if loop.time() >= deadline:
+                await self._no_start(f"the controller did not {wanted} within "
+                                     f"{self.startup_timeout_s:g} s")
+            await asyncio.sleep(0.01)
+
+    async def _no_start(self, reason: str) -> None:
+        self.finish("no_start", f"{reason}: the run never started")
+        await asyncio.Event().wait()
+
+    async def _wait_for_subscriptions(self, deadline: float) -> None:
+        """``auto``, rosbridge: its subscriptions, settled, choose the trigger."""
+        loop = asyncio.get_running_loop()
+        wanted = " or ".join(("/odom", SCAN.name, CLOCK.name))
+        await self._until(lambda: bool(set(self.subscribed()) & set(AUTO_TOPICS)), deadline,
+                          f"subscribe to {wanted} (or another topic published every tick)")
+        seen, since = set(self.subscribed()), loop.time()
+        while loop.time() - since < SETTLE_S:
+            await asyncio.sleep(0.01)
+            now = set(self.subscribed())
+            if now != seen:
+                seen, since = now, loop.time()
+        if seen & set(TICK_TOPICS):
+            self.trigger, self.scan_fallback = "/odom", SCAN.name in seen
+        elif SCAN.name in seen:
+            self.trigger = SCAN.name
+        else:
+            self.trigger, self.every = CLOCK.name, self.scenario.controller_period_ticks
+
+    async def _wait_for_graph(self, deadline: float) -> None:
+        """``auto``, rclpy: its nodes spin and the robot has matched what they subscribe."""
+        loop = asyncio.get_running_loop()
+        assert self.graph_factory is not None
+        graph, state = None, "no node of the controller appeared on the run's ROS graph"
+        while True:
+            graph = graph or self.graph_factory()
+            if graph is not None and graph.ready():
+                served, refused = graph.subscriptions()
+                state = (f"its node {', '.join(graph.active)} subscribes to none of the "
+                         f"robot's topics (not even /clock: is use_sim_time set?)"
+                         + "".join(f"; {line}" for line in refused))
+                if served:
+                    state = f"the robot did not match its subscriptions ({', '.join(served)})"
+                if served and graph.matched(served) and \
+                        await graph.round_trip(STEP_TIMEOUT_S) and \
+                        graph.subscriptions() == (served, refused) and graph.matched(served):
+                    self.graph = graph
+                    graph.served = set(served)
+                    self.subscribed_at_start = sorted(served)
+                    self.incompatible_qos = refused
+                    return
+            elif graph is not None and graph.active:
+                state = (f"its node {', '.join(graph.active)} does not answer on the graph "
+                         "(its parameter services)")
+            if loop.time() >= deadline:
+                await self._no_start(f"the controller was not ready within "
+                                     f"{self.startup_timeout_s:g} s: {state}")
+            await asyncio.sleep(0.01)
 
     def after_tick(self) -> None:
         """The schedule's tick listener: the timed changes due, and the run's end."""
+        self._last_tick_topics, self._tick_topics = self._tick_topics, set()
         now_s = self.sim_time_s
         sim = self.robot.sim
         while self.pending and self.pending[0].at_s <= now_s + 1e-9:
@@ -246,9 +425,15 @@ class LockStep:
 
     def run_end(self, ended_by: str, reason: str) -> RunEnd:
         """How the run ended, as it stands."""
+        last_s = None if self.last_command_tick is None else \
+            round(self.last_command_tick * TICK_PERIOD_S, 6)
         return RunEnd(ended_by, reason, round(self.sim_time_s, 6), self.clock.ticks,
-                      self.epoch_s, self.mode, self.step_on, self.commands,
-                      self.steps_waited, self.missed, self.first_miss_s)
+                      self.epoch_s, self.mode, self.stepped_on, self.commands,
+                      self.steps_waited, self.missed, self.first_miss_s,
+                      self.subscribed_at_start, self.incompatible_qos, last_s,
+                      self.probe_commands,
+                      self.probe_commands is not None
+                      and self.probe_commands >= WALL_PACED_COMMANDS)
 
     def write(self) -> None:
         """Write ``run.json`` (atomically)."""
@@ -266,7 +451,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--scenario", default=None, help="the suite's scenario to run")
     parser.add_argument("--out", type=Path, required=True, help="run.json and recording/")
     parser.add_argument("--mode", choices=MODES, default="deterministic")
-    parser.add_argument("--step-on", choices=tuple(STEP_ON), default="odom")
+    parser.add_argument("--step-on", choices=tuple(STEP_ON), default="auto")
     parser.add_argument("--startup-timeout", type=float, default=STARTUP_TIMEOUT_S)
     parser.add_argument("--params", default=None,
                         help="grade on the robot of this parameter file (websim fit's)")
@@ -318,9 +503,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
     speed = SPEED_MAX if args.mode == "deterministic" else 1.0
-    clock = SimClock(TICK_PERIOD_S, speed)
+    clock = SimClock(TICK_PERIOD_S, speed, epoch_s=0.0)  # /clock starts at 0, as Gazebo's
     simulation = Simulation(scenario.world, scenario.robot, mode=scenario.mode,
-                            seed=scenario.seed,
+                            seed=scenario.seed, lidar=scenario.lidar,
                             noise=scenario.world.noise_over(NoiseParams()))
     robot = VirtualRobot(simulation, clock)
     token = strong_token()
@@ -328,6 +513,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     recorder = Recorder(args.out / RECORDING_DIR)
     site = sites.single_robot(robot, token, grade_limits(args.mode), OriginPolicy.default(
         args.host, args.http_port, []), args.ws_port, recorder=recorder)
+    site.ros_parameters.update(GRADE_NODE_PARAMETERS)
     host = site.front.host  # type: ignore[attr-defined]
     host.bridge.services.add(RESET_SERVICE, "std_srvs/srv/Empty", _refuse_reset)
 
@@ -337,9 +523,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     def connected() -> bool:
         return bool(host.bridge.sessions) or bool(graph_subscribed(site))
 
+    graphs: list[Any] = []
+
+    def controller_graph() -> Any:
+        """The controller's side of the ROS graph, once it runs (``--ros``)."""
+        if not graphs and site.ros is not None:
+            from websim.grade_graph import ControllerGraph
+            node = site.ros.robot_node
+            graph = ControllerGraph(node, node.robot_publishers(), asyncio.get_running_loop())
+            node.publish_hook = graph.hold  # lock step hands the ticks' messages over
+            graphs.append(graph)
+        return graphs[0] if graphs else None
+
     lock_step = LockStep(scenario, robot, clock, subscribed, connected, mode=args.mode,
                          step_on=args.step_on, out=args.out,
-                         startup_timeout_s=args.startup_timeout)
+                         startup_timeout_s=args.startup_timeout,
+                         graph=controller_graph if args.ros else None)
     schedule = site.schedule()
     schedule.gates.append(lock_step.gate)
     schedule.tick_listeners.append(lock_step.after_tick)

@@ -9,6 +9,10 @@ everything its callbacks do to the robot or the bridge is handed to the loop
 (``LoopAccess``), and whatever needs an answer (a parameter change, a reset) waits for it
 there.
 
+Each tick's ``/clock`` goes onto the graph after the tick's other messages (``clock_after``):
+a node on sim time then has the tick's ``/odom`` and ``/scan`` before its timers see the
+tick's time (``websim grade``'s lock step goes further: ``VirtualRobotNode.publish_hook``).
+
 Two nodes share one rclpy ``Context`` (no global state; rclpy's signal handlers stay off, the
 server handles SIGINT and SIGTERM): ``virtual_robot`` and ``rosbridge_websocket``, the relay
 (``rosbridge.graph.relay``), as a real rosbridge deployment names them.
@@ -19,11 +23,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import threading
+from collections.abc import Mapping
+from typing import Any
 
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from ros_nodes.robot_interface import CLOCK
@@ -68,10 +75,13 @@ class RosRuntime:
             a graph topic's messages, an action's or a graph service's answers and the robot
             node's parameter events go out at once. None: with the next tick
             (``Writers.sweep``).
+        parameters: overrides of the robot node's parameters (``websim grade --ros``:
+            ``scan_reliability: reliable``).
     """
 
     def __init__(self, robot: VirtualRobot, bridge: Bridge,
-                 loop: asyncio.AbstractEventLoop, writers: Writers | None = None, *,
+                 loop: asyncio.AbstractEventLoop, writers: Writers | None = None,
+                 parameters: Mapping[str, Any] | None = None, *,
                  simulation: SimulationServices | None = None) -> None:
         self._bridge = bridge
 
@@ -83,9 +93,11 @@ class RosRuntime:
         self.context = Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         try:
-            self.robot_node = VirtualRobotNode(robot, access=access, own_timer=False,
-                                               ignore_cmd_vel_from=RELAY_NODE_NAME,
-                                               context=self.context)
+            self.robot_node = VirtualRobotNode(
+                robot, access=access, own_timer=False, ignore_cmd_vel_from=RELAY_NODE_NAME,
+                clock_after=loop.call_soon, context=self.context,
+                parameter_overrides=[Parameter(name, value=value)
+                                     for name, value in (parameters or {}).items()])
             self.relay_node = Node(RELAY_NODE_NAME, context=self.context)
         except BaseException:
             self.context.try_shutdown()

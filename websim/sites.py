@@ -61,6 +61,8 @@ class Site:
             ``ClassRosRuntime``) while it runs, else None.
         simulation: the single robot's simulation services (``simulation_interfaces``),
             which ``--ros`` also offers on the graph; None for a class.
+        ros_parameters: overrides of the single robot's node parameters with ``--ros``
+            (``websim grade``: a reliable ``/scan``).
     """
 
     front: WebSocketFront
@@ -74,6 +76,7 @@ class Site:
     description: str | None = None
     ros: Any = None
     simulation: SimulationServices | None = None
+    ros_parameters: dict[str, Any] = field(default_factory=dict)
 
     def close(self) -> None:
         """Close the recordings, save a class's state and release its file (at shutdown)."""

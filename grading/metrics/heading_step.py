@@ -15,7 +15,9 @@ error e(t) = wrap(setpoint_k - h(t)) and the error along the way u(t) = S_0 + ..
   until the step ends; never, if the last sample of the step is outside;
 - overshoot: how far the heading went past the setpoint, as a fraction of |S_k|:
   max(0, max(-sign(S_k) u)) / |S_k|;
-- steady-state error: |mean e| over the last ``final_window_s`` of the step (rad).
+- steady-state error: the size of the circular mean of e over the last ``final_window_s`` of
+  the step (rad; ``grading.trajectory.circular_mean_rad``: errors that straddle ±pi, a robot
+  wobbling at the opposite heading, do not average to 0).
 
 The metric's figures are the worst over the steps. Score (docs/grading.md gives the reason):
 the product of three factors, each 1 within its limit and limit/figure beyond it
@@ -35,7 +37,13 @@ import numpy as np
 
 from grading.metric_fields import fraction, optional, param, positive
 from grading.results import MetricResult, within_ratio
-from grading.trajectory import Trajectory, check_trajectory, times, unwrapped_yaw
+from grading.trajectory import (
+    Trajectory,
+    check_trajectory,
+    circular_mean_rad,
+    times,
+    unwrapped_yaw,
+)
 from physics.pid import wrap_angle
 from physics.world import World
 
@@ -54,7 +62,7 @@ class HeadingStepParams:
         tolerance_rad: half-width of the settling band, and the largest steady-state error
             that passes (rad).
         max_overshoot: the largest overshoot that passes, as a fraction of the step.
-        final_window_s: the stretch at the end of each step whose mean error is its
+        final_window_s: the stretch at the end of each step whose mean error (circular) is its
             steady-state error (s).
     """
 
@@ -136,7 +144,7 @@ def _step(t: np.ndarray, heading: np.ndarray, index: int,
         settling = float(window_t[outside[-1] + 1] - start_s)
     final = window_t >= window_t[-1] - params.final_window_s
     return {**step, "settling_time_s": settling, "overshoot": overshoot,
-            "steady_state_error_rad": abs(float(np.mean(error[final]))),
+            "steady_state_error_rad": abs(circular_mean_rad(error[final])),
             "final_error_rad": float(error[-1])}
 
 
