@@ -189,8 +189,17 @@ def test_the_controller_cannot_reset_pause_or_fake_the_graded_run(tmp_path: Path
         url = urlsplit(os.environ["WEBSIM_URL"])
         ros = roslibpy.Ros(url.hostname, url.port)
         ros.run()
-        for name, kind, args in (("/reset_simulation", "std_srvs/srv/Empty", {}),
-                                 ("/websim/pause", "websim/srv/Pause", {"paused": True})):
+        goal = {"position": {"x": 9.0, "y": 9.0, "z": 0.0},
+                "orientation": {"x": 0.0, "y": 0.0, "z": 0.7071, "w": 0.7071}}
+        for name, kind, args in (
+                ("/reset_simulation", "std_srvs/srv/Empty", {}),
+                ("/websim/pause", "websim/srv/Pause", {"paused": True}),
+                ("/set_entity_state", "simulation_interfaces/srv/SetEntityState",
+                 {"entity": "robot", "state": {"pose": goal}}),
+                ("/robot/teleport_absolute", "turtlesim/srv/TeleportAbsolute",
+                 {"x": 9.0, "y": 9.0, "theta": 1.5708}),
+                ("/set_simulation_state", "simulation_interfaces/srv/SetSimulationState",
+                 {"state": {"state": 2}})):
             try:
                 roslibpy.Service(ros, name, kind).call(roslibpy.ServiceRequest(args), timeout=5)
                 print(name, "ACCEPTED", flush=True)
@@ -212,6 +221,8 @@ def test_the_controller_cannot_reset_pause_or_fake_the_graded_run(tmp_path: Path
     output = graded["controller"]["output_tail"]
     assert "/reset_simulation REFUSED" in output and "cannot be reset" in output
     assert "/websim/pause REFUSED" in output and "needs admin rights" in output
+    for name in ("/set_entity_state", "/robot/teleport_absolute", "/set_simulation_state"):
+        assert f"{name} REFUSED" in output  # no simulation services in a graded run
     # graded on the robot's own ground truth, as recorded from its tap: the fake is not in it
     assert graded["passed"] is False and graded["score"] == 0.0
     assert "never settled" in graded["reason"]

@@ -25,7 +25,8 @@ recording to ``DIR/recording`` (``--record``), with five things of its own:
   client's does, and a subscription the robot cannot serve is named (incompatible QoS);
 - **no changes from the controller**: ``/reset_simulation`` is refused; parameters and pause
   need the admin token, which only this process knows (the controller's environment does not
-  hold it).
+  hold it); the simulation services (``simulation_interfaces`` and turtlesim's teleports,
+  resets, pause and steps) are not offered.
 
 How it ended goes to ``DIR/run.json`` (``RunEnd``), which the grader reads with the bag.
 """
@@ -512,7 +513,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     serve_args = serve_command_arguments(args)
     recorder = Recorder(args.out / RECORDING_DIR)
     site = sites.single_robot(robot, token, grade_limits(args.mode), OriginPolicy.default(
-        args.host, args.http_port, []), args.ws_port, recorder=recorder)
+        args.host, args.http_port, []), args.ws_port, recorder=recorder,
+        simulation_services=False)  # no teleport, pause or step for the graded controller
     site.ros_parameters.update(GRADE_NODE_PARAMETERS)
     host = site.front.host  # type: ignore[attr-defined]
     host.bridge.services.add(RESET_SERVICE, "std_srvs/srv/Empty", _refuse_reset)

@@ -150,7 +150,8 @@ class Site:
 
 def single_robot(robot: VirtualRobot, token: str, limits: ClientLimits,
                  origins: OriginPolicy, ws_port: int = 9090,
-                 recorder: Recorder | None = None) -> Site:
+                 recorder: Recorder | None = None, *,
+                 simulation_services: bool = True) -> Site:
     """Today's websim: one robot at ``ws://HOST:9090/``.
 
     Args:
@@ -160,10 +161,13 @@ def single_robot(robot: VirtualRobot, token: str, limits: ClientLimits,
         origins: which web pages may connect.
         ws_port: where the pages are told its bridge is: the server's port, or a proxy's.
         recorder: records the robot (``--record``); None: nothing is recorded.
+        simulation_services: offer ``simulation_interfaces`` and turtlesim's names (teleport,
+            pause, step...); a graded run offers none (``websim.grade_server``: nothing a
+            controller calls may change its run).
     """
     server = SimServer(robot, token, limits=limits, origins=origins)
-    simulation = add_simulation_services(server.bridge,
-                                         OneRobotWorld(server.host, SINGLE_ROBOT_NAME))
+    simulation = add_simulation_services(server.bridge, OneRobotWorld(
+        server.host, SINGLE_ROBOT_NAME)) if simulation_services else None
     site = Site(server, robot=robot, ws_port=ws_port, recorder=recorder,
                 headline=f"world '{robot.sim.world.name}', {robot.sim.mode} mode",
                 simulation=simulation)
