@@ -28,6 +28,7 @@ from typing import Any
 from classroom.state import SAVE_INTERVAL_S, ClassState
 from physics import TICK_PERIOD_S, ConfigError, load_world
 from physics.snapshots import Pose2D
+from physics.validation import read_text_file
 from ros_nodes.recording import Recorder
 from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
 from ros_nodes.robot_services import require_admin
@@ -105,10 +106,7 @@ def read_roster(path: str | Path) -> list[Student]:
             names the file and the line.
     """
     source = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as error:
-        raise ConfigError(f"{source}: cannot read roster: {error.strerror}") from None
+    text = read_text_file(path, "roster")
     students: list[Student] = []
     seen: set[str] = set()
     for number, raw in enumerate(text.splitlines(), start=1):
