@@ -31,6 +31,7 @@ from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
 
 from physics import TICK_PERIOD_S, ConfigError
+from ros_nodes.bag_bounds import check_bag
 from ros_nodes.recording import ROBOT_JSON_KEY
 from ros_nodes.robot_description import robot_json
 from ros_nodes.robot_interface import RESERVED_NAMESPACES
@@ -76,7 +77,8 @@ class Recording:
         path: the bag's folder (``metadata.yaml`` and its files) or an ``.mcap`` file.
 
     Raises:
-        ConfigError: no such bag, or one that cannot be read (the reason says why).
+        ConfigError: no such bag, one that cannot be read, or one beyond the bounds of
+            ``ros_nodes.bag_bounds`` (its chunks, its YAML): the reason says why.
     """
 
     def __init__(self, path: Path) -> None:
@@ -86,6 +88,7 @@ class Recording:
             raise ConfigError(f"{path}: no such recording (a --record bag's folder or its "
                               ".mcap file)")
         self.path = path
+        check_bag(path)  # nothing in it can make the reader exhaust memory
         try:
             self._reader = Reader(path)
             self._reader.open()
