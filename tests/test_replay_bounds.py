@@ -185,7 +185,7 @@ def test_a_bag_compressed_per_file_is_refused_with_how_to_convert_it(tmp_path: P
         "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: mcap\n"
         "  compression_mode: FILE\n  compression_format: zstd\n"
         "  relative_file_paths: [bag_0.mcap.zstd]\n")
-    with pytest.raises(ConfigError, match="compressed per file .*ros2 bag"):
+    with pytest.raises(ConfigError, match=r"compressed per file .*ros2 bag"):
         check_bag(folder)
 
 
