@@ -35,7 +35,7 @@ from classroom.registry import (
 from physics import ConfigError, Simulation, load_world
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.session import Session
-from websim.sites import INSTRUCTOR_ROW
+from websim.sites import instructor_links_path
 
 from server_process import ADMIN_TOKEN, ServerProcess, start_server, wait_for
 
@@ -224,9 +224,12 @@ def test_unknown_names_and_the_root_are_refused_with_a_reason(server: ServerProc
 def test_each_robot_token_is_admin_on_its_robot_only(server: ServerProcess,
                                                     links: Path) -> None:
     rows = {row["name"]: row for row in csv.DictReader(links.open())}
-    assert list(rows) == ["alice", "bob", "carol", "#instructor"]  # last: the dashboard
-    assert rows["#instructor"]["page"].endswith(f":{server.http_port}/class?token={ADMIN_TOKEN}")
-    assert rows["#instructor"]["token"] == ADMIN_TOKEN
+    assert list(rows) == ["alice", "bob", "carol"]  # the handout: the robots only
+    assert ADMIN_TOKEN not in links.read_text()
+    private = dict(line.split("=", 1) for line in
+                   instructor_links_path(links).read_text().splitlines()[1:])
+    assert private["dashboard"].endswith(f":{server.http_port}/class?token={ADMIN_TOKEN}")
+    assert private["token"] == ADMIN_TOKEN
     assert rows["carol"]["token"] == CAROL_TOKEN
     alice_token = rows["alice"]["token"]
     assert rows["alice"]["admin_page"].endswith(f"/robots/alice/admin?token={alice_token}")
@@ -472,8 +475,7 @@ def test_students_cannot_ask_for_status_or_pause(server: ServerProcess) -> None:
 
 def test_robot_tokens_derive_from_the_class_secret_not_the_instructor_token(
         server: ServerProcess, links: Path) -> None:
-    rows = {row["name"]: row["token"] for row in csv.DictReader(links.open())
-            if row["name"] != INSTRUCTOR_ROW}
+    rows = {row["name"]: row["token"] for row in csv.DictReader(links.open())}
     assert rows["alice"] != derived_token(ADMIN_TOKEN, "alice")  # no offline guessing
     assert len(rows["alice"]) == 24 and len(set(rows.values())) == 3
     assert rows["carol"] == CAROL_TOKEN  # the roster's own token wins
