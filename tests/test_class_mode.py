@@ -601,3 +601,35 @@ def test_an_invalid_or_mistyped_name_is_refused_for_what_it_is(tmp_path: Path) -
                                    lazy=True), ADMIN_TOKEN)
     assert closed.find("/robots/carl") == "no robot named 'carl' in this class; " \
                                           "did you mean carol?"
+
+
+def test_tokenless_watchers_cannot_take_a_robots_tf_republisher_from_its_owner(
+        server: ServerProcess) -> None:
+    """Eight sockets without a token ask bob's TF republisher for all 64 republications (as
+    ros3djs pages would): they get the watchers' share; bob's own page still gets its own."""
+    request = {"source_frames": ["base_link"], "target_frame": "odom", "angular_thres": 0.0,
+               "trans_thres": 0.0, "rate": 10.0}
+
+    async def attack() -> tuple[int, str, dict[str, Any]]:
+        watchers = [await websockets.connect(robot_url(server, "bob")) for _ in range(8)]
+        granted, refusal = 0, ""
+        try:
+            for ws in watchers:
+                for number in range(8):
+                    await ws.send(json.dumps({"op": "call_service", "id": f"w{number}",
+                                              "service": "/republish_tfs", "args": request}))
+                    while True:
+                        reply = json.loads(await asyncio.wait_for(ws.recv(), 5))
+                        if reply.get("op") == "service_response":
+                            break
+                    granted += bool(reply["result"])
+                    refusal = refusal or ("" if reply["result"] else str(reply["values"]))
+            owner = await call(owner_url(server, "bob"), "/republish_tfs", request)
+        finally:
+            for ws in watchers:
+                await ws.close()
+        return granted, refusal, owner
+
+    granted, refusal, owner = asyncio.run(attack())
+    assert granted == 48 and "are kept for its owner" in refusal
+    assert owner["result"] and owner["values"]["topic_name"].startswith("/tf_repub_")
