@@ -66,7 +66,7 @@ GZIP_LEVEL = 5
 size; once per file and change."""
 
 
-LIVE_DOCUMENTS = ("/robot.json", "/config.json")
+LIVE_DOCUMENTS = ("/robot.json", "/config.json", "/workers.json")
 """Documents the server may fill itself (``LiveDocuments``) instead of serving the file."""
 
 CACHE_CONTROL = "no-cache"

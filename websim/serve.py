@@ -29,7 +29,7 @@ from classroom.state import DEFAULT_ENROLMENT_HOURS
 from physics import TICK_PERIOD_S, ConfigError
 from physics.shipped import shipped
 from physics.world import LOCALIZATIONS
-from ros_nodes.recording import DEFAULT_MAX_MB, Recorder
+from ros_nodes.recording import DEFAULT_CLIENT_MB_PER_MIN, DEFAULT_MAX_MB, Recorder
 from ros_nodes.robot_interface import NODE_NAME
 from ros_nodes.robot_server import SimServer
 from rosbridge.core.clock import SPEED_MAX
@@ -188,6 +188,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="MB",
                         help="with --record: a robot's bag reaching this size on disk is "
                              f"closed and recording it stops (default {DEFAULT_MAX_MB:g})")
+    parser.add_argument("--record-client-mb-per-min", type=_positive(float),
+                        default=DEFAULT_CLIENT_MB_PER_MIN, metavar="MB",
+                        help="with --record: what a robot's clients (their /cmd_vel) may add "
+                             "to its bag per minute; beyond it their messages are left out, "
+                             "said in the log and on the dashboard, and the robot's own "
+                             f"topics go on recording (default {DEFAULT_CLIENT_MB_PER_MIN:g})")
     parser.add_argument("--ros", action="store_true",
                         help="also run the virtual_robot node on the ROS 2 graph and relay "
                              "rosbridge topics to it (needs rclpy: pip install '.[ros]')")
@@ -563,7 +569,9 @@ def recorder_from(args: argparse.Namespace) -> Recorder | None:
                           f"{error.strerror}") from None
     if not directory.is_dir() or not os.access(directory, os.W_OK | os.X_OK):
         raise ConfigError(f"--record {directory}: not a folder this user can write")
-    return Recorder(directory, max_bytes=int(args.record_max_mb * 1e6))
+    return Recorder(directory, max_bytes=int(args.record_max_mb * 1e6),
+                    client_bytes_per_minute=int(getattr(args, "record_client_mb_per_min",
+                                                        DEFAULT_CLIENT_MB_PER_MIN) * 1e6))
 
 
 def run(args: argparse.Namespace, site: Site, token: str) -> int:

@@ -123,6 +123,8 @@ class Site:
         A class robot not hosted here (yet) is described as a new robot would be: behind a
         proxy the page and the WebSocket of one robot may be served by different workers.
         """
+        if name == "workers.json" and (robot is not None or self.classroom is None):
+            return None  # a class's root only
         if robot is None:
             if self.classroom is None:  # one robot: its description, and where its bridge is
                 if name == "robot.json":
@@ -135,6 +137,10 @@ class Site:
                                    "ws": url, "adminWs": url})
             if name == "robot.json":  # a class's root (the dashboard): a class robot's
                 return self.new_robot_json
+            if name == "workers.json":  # one process (behind nginx, nginx answers it)
+                return json.dumps({"about": "this class is served by one websim serve "
+                                            "process: its root view is at the WebSocket "
+                                            "root", "workers": None})
             url = f"ws://{url_name(hostname)}:{self.ws_port}/"
             return json.dumps({"about": "the instructor's view of this class, filled by "
                                         "websim serve; robotsPath: where its robots' pages are",
