@@ -77,8 +77,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              f"connection (1009; default {defaults.max_frame_bytes})")
     parser.add_argument("--max-queued-bytes", type=_positive(int),
                         default=defaults.max_queued_bytes, metavar="BYTES",
-                        help="most bytes waiting to be sent to one client; a client that lets "
-                             "more pile up is not reading and is closed (1008; default "
+                        help="most bytes waiting to be sent to one client: beyond it its "
+                             "oldest topic messages are dropped for the newest; replies beyond "
+                             "it close it (1008; default "
                              f"{defaults.max_queued_bytes})")
     parser.add_argument("--max-clients", type=_positive(int), default=defaults.max_clients,
                         metavar="N",
