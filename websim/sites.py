@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from classroom.class_server import ClassServer, closest_names
+from classroom.class_server import ClassServer
 from classroom.registry import (
     Classroom,
     Student,
@@ -108,14 +108,32 @@ class Site:
         """Whether ``/robots/NAME/`` is a robot's page (pages create no robot)."""
         return self.classroom is not None and self.classroom.knows(name)
 
-    def why_no_robot(self, name: str) -> tuple[str, list[str]]:
-        """Why ``/robots/NAME/`` is no robot's page, and the names it may have meant."""
+    def why_no_robot(self, name: str, address: str = "") -> str:
+        """Why ``/robots/NAME/`` is no robot's page, as the student is told.
+
+        The names close to theirs (classmates') go to the instructor's log only, once per
+        address a while (the front's refusal log).
+        """
         if self.classroom is None:
-            return "this server runs one robot, not a class: its page is /", []
-        known = list(self.classroom.students) + [hosted for hosted, _ in self.classroom]
-        reason = self.front.why_unknown(name) if isinstance(self.front, ClassServer) else \
-            f"no robot named '{name[:40]}' here"
-        return reason, closest_names(name, known)
+            return "this server runs one robot, not a class: its page is /"
+        if not isinstance(self.front, ClassServer):
+            return f"no robot named '{name[:40]}' here"
+        reason = self.front.why_unknown(name)
+        self.front.refusals.note(address, "no such robot page", f"refused the page of "
+                                 f"{ROBOTS_PREFIX}{name[:40]}/: {reason}"
+                                 + self.front.log_hint(f"{ROBOTS_PREFIX}{name}"))
+        return reason
+
+    def root_notice(self) -> str | None:
+        """What ``/`` of a class says instead of a robot's page; None for one robot.
+
+        No robot is there: a student who left out ``/robots/NAME`` got a robot page that
+        could never connect.
+        """
+        if self.classroom is None:
+            return None
+        return ("This server hosts a class: each student's robot has its own page, at "
+                f"{ROBOTS_PREFIX}NAME/ (the instructor's dashboard is /class).")
 
     def document(self, robot: str | None, name: str, hostname: str) -> str | None:
         """The live ``robot.json`` of a robot, and a class robot's ``config.json``.
