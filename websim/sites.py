@@ -47,6 +47,13 @@ from rosbridge.transport.front import WebSocketFront
 from rosbridge.transport.schedule import Schedule
 from websim.lan import lan_addresses
 
+REPLAY_SERVICE = "/websim/replay"
+"""A replay's player controls (``websim.replay.ReplayHost.control``), named to its page in
+``config.json``."""
+
+REPLAY_SERVICE_TYPE = "websim/srv/Replay"
+"""Its type, as the page names it."""
+
 
 @dataclass
 class Site:
@@ -150,9 +157,12 @@ class Site:
                         return self.description
                     return robot_json(self.robot.sim.params, self.robot.sim.lidar.params)
                 url = f"ws://{url_name(hostname)}:{self.ws_port}/"
-                return json.dumps({"about": "this server's robot, filled by websim serve: "
-                                            "the bridge of the server that served the page",
-                                   "ws": url, "adminWs": url})
+                single: dict[str, object] = {
+                    "about": "this server's robot, filled by websim serve: the bridge of the "
+                             "server that served the page", "ws": url, "adminWs": url}
+                if self.replay is not None:  # the page is a player: no driving
+                    single["replay"] = {"name": REPLAY_SERVICE, "type": REPLAY_SERVICE_TYPE}
+                return json.dumps(single)
             if name == "robot.json":  # a class's root (the dashboard): a class robot's
                 return self.new_robot_json
             if name == "workers.json":  # one process (behind nginx, nginx answers it)
