@@ -326,6 +326,8 @@ class RobotHost:
             "clients": len(sessions),
             "queued_frames": sum(len(session.outbox) for session in sessions),
             "queued_bytes": sum(session.outbox.queued_bytes for session in sessions),
+            "frames_dropped": sum(session.outbox.dropped for session in sessions),
+            "frames_sent": sum(session.outbox.sent for session in sessions),
             "sim_time_s": round(self.robot.sim.time_s, 3),
             "speed": speed_text(self.schedule.speed),
             "clients_released": self.schedule.clients_released,

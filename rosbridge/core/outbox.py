@@ -97,6 +97,9 @@ class Outbox:
         """The sequence number of the topic message whose frames are half sent, if any."""
         self.dropped = 0
         """Topic frames dropped because a newer one replaced them."""
+        self.sent = 0
+        """Topic messages taken to be written (``pop``, ``take``): with ``dropped`` and what
+        waits, every topic message queued is accounted for."""
         self.overflowed: str | None = None
         """Why the client must be closed (it let too much pile up), or None."""
         self.behind = False
@@ -230,6 +233,8 @@ class Outbox:
             if isinstance(entry, tuple) and len(entry) > 1:
                 oldest.appendleft((sequence, entry[1:]))
                 self._sending = sequence
+            else:
+                self.sent += 1
         frame = entry[0] if isinstance(entry, tuple) else entry
         self.queued_bytes -= len(frame)
         return frame
@@ -250,6 +255,7 @@ class Outbox:
         self._reply_bytes = 0
         self._sending = None
         topic_frames = [entry for queue in self._topics.values() for entry in queue]
+        self.sent += len(topic_frames)
         if topic_frames:
             topic_frames.sort(key=_sequence_of)
             frames.extend(_flat([self._made(frame) for _, frame in topic_frames]))
