@@ -209,6 +209,18 @@ def as_number_list(where: str, value: Any, length: int) -> list[float]:
     return [as_finite_float(f"{where}[{i}]", item) for i, item in enumerate(value)]
 
 
+def plain_data(value: Any) -> Any:
+    """A parsed document with its ``LinedDict`` and ``LinedList`` as plain dicts and lists.
+
+    What ``yaml.safe_dump`` writes back (it refuses their subclasses).
+    """
+    if isinstance(value, dict):
+        return {key: plain_data(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [plain_data(item) for item in value]
+    return value
+
+
 class LinedDict(dict[Any, Any]):
     """A YAML mapping that remembers its line and the line of each of its keys (1-based).
 
