@@ -317,13 +317,17 @@ def state_lines(state: ClassState, classroom: Classroom, token_kept: bool,
             restored.append(f"{len(state.enrolments())} enrolments")
         lines = [f"{where}: restored, saved {ago} ago: {', '.join(restored)} "
                  "(--fresh starts anew)"]
+        if anonymous:  # nothing tells two sections of --class N apart but this line
+            lines.append("           the links of the class run from here then drive these "
+                         "robots: another class or section? --fresh (new links), or its own "
+                         "--state FILE")
     if classroom.forgotten:
         shown_names = ", ".join(classroom.forgotten[:5])
         more = f" and {len(classroom.forgotten) - 5} more" if len(classroom.forgotten) > 5 \
             else ""
         lines.append(f"           forgot {len(classroom.forgotten)} enrolments nobody used for "
                      f"the enrolment time ({shown_names}{more})")
-    if anonymous:
+    if anonymous and state.saved_s is None:
         lines.append("           (--class N keeps its state per folder and port; "
                      "--state FILE names one)")
     return lines
