@@ -25,6 +25,7 @@ from mcap.records import (
     Footer,
     Header,
     Message,
+    MessageIndex,
     Schema,
 )
 
@@ -39,7 +40,11 @@ else:
 MAX_RSS_MB = 400
 """What refusing a bomb may cost the replay process (its imports take about 150 MB)."""
 
-QOS = "- history: 1\n  depth: 1\n  reliability: 1\n  durability: 2\n"
+QOS = ("- history: 1\n  depth: 1\n  reliability: 1\n  durability: 2\n"
+       "  deadline: {sec: 0, nsec: 0}\n  lifespan: {sec: 0, nsec: 0}\n  liveliness: 1\n"
+       "  liveliness_lease_duration: {sec: 0, nsec: 0}\n"
+       "  avoid_ros_namespace_conventions: false\n")
+"""A channel's offered QoS profile as rosbag2 writes it (rosbags reads every field)."""
 
 
 def zeros_zstd(megabytes: int) -> bytes:
@@ -75,12 +80,16 @@ def mcap_file(path: Path, chunks: list[Chunk], *, qos: str = QOS,
     for chunk in chunks:
         offset = out.count
         chunk.write(out)
+        chunk_length = out.count - offset
+        index_offset = out.count  # its message index: a reader then knows channel 1 is in it
+        MessageIndex(channel_id=1, records=[(chunk.message_start_time, 0)]).write(out)
         fields = {"compressed_size": len(chunk.data),
                   "uncompressed_size": chunk.uncompressed_size, **(index_override or {})}
         indexes.append(ChunkIndex(
             message_start_time=chunk.message_start_time,
             message_end_time=chunk.message_end_time, chunk_start_offset=offset,
-            chunk_length=out.count - offset, message_index_offsets={}, message_index_length=0,
+            chunk_length=chunk_length, message_index_offsets={1: index_offset},
+            message_index_length=out.count - index_offset,
             compression=chunk.compression, **fields))
     DataEnd(data_section_crc=0).write(out)
     summary_start = out.count
