@@ -168,7 +168,7 @@ async def run(n_robots: int, seconds: float, log_dir: Path) -> list[dict[str, An
     links = log_dir / f"links-{n_robots}.csv"
     with running_server(log_dir, ["--class", str(n_robots), "--links", str(links)]) as server:
         with links.open(newline="") as file:
-            rows = [row for row in csv.DictReader(file) if not row["name"].startswith("#")]
+            rows = list(csv.DictReader(file))
         names = [row["name"] for row in rows]
         drivers = [await connect(f"ws://{HOST}:{server.ws_port}/robots/{row['name']}"
                                  f"?token={row['token']}", compression=None)

@@ -6,7 +6,12 @@ process. Per client count (``--clients``, default 1 10 40 100) it prints, over a
 ``--seconds`` after every client received every topic:
 
 * delivery: frames received per client and topic over frames published (from /healthz ticks),
-  the worst client's share;
+  the worst client's share; and the server's ledger of them, ``unaccounted``: the frames
+  published to the clients that the server neither handed to their sockets, nor dropped for a
+  client that was behind (its outbox keeps a topic's newest frame), nor holds waiting
+  (/healthz ``frames_sent``, ``frames_dropped``, ``queued_frames``). It is 0 whatever the
+  machine's load: a loaded machine's client process that falls behind lowers delivery (the
+  frames wait in its socket's buffers, or are dropped for newer ones), never this;
 * latency: cmd_vel→odom, from a client sending a /cmd_vel to that client receiving the first
   /odom whose speed is that command's (every command carries a speed no other one has), p50
   and p99 over all clients. It includes the wait for the next 50 ms tick. With many drivers
@@ -170,9 +175,16 @@ async def window(server: Server, clients: list[Client], commands: list[Commands]
                 expected_frames(spec, int(before["ticks"]), int(after["ticks"]))
                 for early, late in zip(counts_before, counts_after, strict=True)
                 for spec in SUBSCRIBED)
+    published = len(clients) * (sum(expected_frames(spec, int(before["ticks"]),
+                                                    int(after["ticks"])) for spec in SUBSCRIBED)
+                                - int(after["scans_shed"] - before["scans_shed"]))
+    ledger = {key: int(after.get(key, 0)) - int(before.get(key, 0))
+              for key in ("frames_sent", "frames_dropped", "queued_frames")}
     samples_ms = [1e3 * sample for sample in latencies_s]
     superseded = sum(each.superseded for each in commands) - superseded_before
     return {"clients": len(clients), "delivered_worst_pct": 100.0 * worst,
+            "dropped_frames": float(ledger["frames_dropped"]),
+            "unaccounted": float(published - sum(ledger.values())),
             "latency_p50_ms": percentile(samples_ms, 50),
             "latency_p99_ms": percentile(samples_ms, 99),
             "answered_pct": 100.0 * len(samples_ms) / max(1, len(samples_ms) + superseded),

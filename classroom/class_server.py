@@ -31,6 +31,9 @@ ROOT_REFUSAL = ("this server hosts a class: connect to ws://HOST:PORT/robots/NAM
                 "NAME (ws://HOST:PORT/ is the instructor's view of every robot: it needs "
                 "the instructor's token)")
 
+NO_NAME_REFUSAL = ("this address names no robot: a robot is at /robots/NAME, NAME as your "
+                   "instructor's links give it")
+
 
 def class_view_limits(limits: ClientLimits, robots: int) -> ClientLimits:
     """A client's ``limits`` sized for a view of ``robots`` robots (the instructor's).
@@ -113,22 +116,32 @@ class ClassServer(WebSocketFront):
         return None
 
     def why_unknown(self, name: str) -> str:
-        """Why there is no robot ``name``: an invalid name, a full class, or an unknown one.
+        """Why there is no robot ``name``, as a student is told.
 
-        An unknown or invalid name gets the closest names, case aside first (``Alice``:
-        ``alice``).
+        None named, an invalid name, a full class, an unknown one. Never the names close to
+        theirs: those are classmates' (``log_hint``: the instructor's log has them).
         """
+        if not name:
+            return NO_NAME_REFUSAL
         if not ROBOT_NAME.fullmatch(name):
-            return (f"'{name[:40]}' is not a robot name (1 to 32 of a-z, 0-9, _ and -)"
-                    + self._did_you_mean(name))
+            return (f"'{name[:40]}' is not a robot name (1 to 32 of a-z, 0-9, _ and -); "
+                    "your instructor's links give your robot's")
         if self.classroom.open_class and len(self.classroom) >= self.classroom.max_robots:
             return f"the class is full ({self.classroom.max_robots} robots)"
-        return f"no robot named '{name[:40]}' in this class" + self._did_you_mean(name)
+        return (f"no robot named '{name[:40]}' in this class; your instructor's links give "
+                "your robot's name")
 
-    def _did_you_mean(self, name: str) -> str:
+    def log_hint(self, path: str) -> str:
+        """For the instructor's log: the names close to a refused ``/robots/NAME``'s.
+
+        The closest names, case aside first (``Alice``: ``alice``); empty when none is.
+        """
+        if not path.startswith(ROBOTS_PREFIX):
+            return ""
+        name = path[len(ROBOTS_PREFIX):].rstrip("/")
         names = list(self.classroom.students) + [hosted for hosted, _ in self.classroom]
-        close = closest_names(name, names)
-        return f"; did you mean {' or '.join(close)}?" if close else ""
+        close = closest_names(name, names) if name else []
+        return f" (names close to it: {', '.join(close)})" if close else ""
 
     def admit(self, name: str | None, address: str) -> tuple[int, str] | None:
         """A new name in an open class spends one of its address's enrolments.

@@ -115,7 +115,7 @@ class InstructorView:
             raise BridgeError(f"no robot named '{robot[:40]}' in this class "
                               "(/websim/robots lists them)")
         inner = Session(session.peer, True, session.outbox, limits=session.limits,
-                        namespace=f"/{robot}")
+                        namespace=f"/{robot}", instructor=True)
         inner.status_level = session.status_level
         host.bridge.connect(inner)
         self._inner[robot] = (host.bridge, inner)

@@ -25,9 +25,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from classroom.state import SAVE_INTERVAL_S, ClassState
+from classroom.state import DEFAULT_ENROLMENT_HOURS, SAVE_INTERVAL_S, ClassState
 from physics import TICK_PERIOD_S, ConfigError, load_world
 from physics.snapshots import Pose2D
+from physics.validation import read_text_file
 from ros_nodes.recording import Recorder
 from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
 from ros_nodes.robot_services import require_admin
@@ -105,10 +106,7 @@ def read_roster(path: str | Path) -> list[Student]:
             names the file and the line.
     """
     source = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as error:
-        raise ConfigError(f"{source}: cannot read roster: {error.strerror}") from None
+    text = read_text_file(path, "roster")
     students: list[Student] = []
     seen: set[str] = set()
     for number, raw in enumerate(text.splitlines(), start=1):
@@ -208,6 +206,8 @@ class Classroom:
         recorder: records every robot from its creation on (``--record``); None: none.
         on_robot: called with (name, host) of each robot once it is made (``websim serve``
             adds its simulation services: ``ros_nodes.simulation_services``).
+        enrolment_hours: an open class's enrolment nobody connected to for this long is
+            forgotten when the class starts (with its robot's state): its name enrols anew.
     """
 
     def __init__(self, roster: list[Student], make_robot: Callable[[Student], VirtualRobot],
@@ -218,7 +218,8 @@ class Classroom:
                  clock: Clock | None = None, state: ClassState | None = None,
                  latched: LatchedBytes | None = None,
                  recorder: Recorder | None = None,
-                 on_robot: Callable[[str, RobotHost], Any] | None = None) -> None:
+                 on_robot: Callable[[str, RobotHost], Any] | None = None,
+                 enrolment_hours: float = DEFAULT_ENROLMENT_HOURS) -> None:
         self._recorder = recorder
         self._on_robot = on_robot
         self.clock: Clock = WallClock() if clock is None else clock
@@ -235,10 +236,16 @@ class Classroom:
         self._make_token = make_token or (lambda name: derived_token(self.secret, name))
         self._hosts: dict[str, RobotHost] = {}
         self._tokens: dict[str, str] = {}
+        roster_names = {student.name for student in roster}
+        self.forgotten: list[str] = [] if state is None else state.forget_enrolments(
+            enrolment_hours * 3600.0, keep=roster_names)
+        """Enrolments forgotten at start: nobody had connected to them for the enrolment
+        time."""
         self._saved: dict[str, dict[str, Any]] = {} if state is None else state.robots()
         self.unclaimed: set[str] = set()
         """Names enrolled in an open class whose token nobody has been handed yet."""
         self.students: dict[str, Student] = {student.name: student for student in roster}
+        self._roster_names = frozenset(roster_names)
         enrolled = {} if state is None else state.enrolments()
         for name, claimed in enrolled.items():
             if name not in self.students and ROBOT_NAME.fullmatch(name):
@@ -344,8 +351,11 @@ class Classroom:
         """Save every robot's state in the state file (if any); never raises."""
         if self.state is None:
             return
+        enrolled = [name for name, host in self
+                    if host.bridge.sessions and name not in self._roster_names]
         try:
-            self.state.save_robots({name: robot_state(host) for name, host in self})
+            self.state.save_robots({name: robot_state(host) for name, host in self},
+                                   used=enrolled)
         except Exception as error:  # a full disk must not stop the class
             log.error("could not save the class's state in %s: %s", self.state.path, error)
 

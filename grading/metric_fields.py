@@ -13,7 +13,13 @@ import dataclasses
 from collections.abc import Callable
 from typing import Any
 
-from physics.validation import as_finite_float, as_non_negative_float, as_positive_float, fail
+from physics.validation import (
+    as_finite_float,
+    as_non_negative_float,
+    as_positive_float,
+    fail,
+    shown,
+)
 
 Check = Callable[[str, Any], Any]
 """Checks a value read from a file: (where, value) -> the value to use, or ConfigError."""
@@ -62,7 +68,7 @@ def fraction(where: str, value: Any) -> float:
     """A number from 0 to 1."""
     number_value = as_finite_float(where, value)
     if not 0.0 <= number_value <= 1.0:
-        raise fail(where, f"must be between 0 and 1, got {value!r}")
+        raise fail(where, f"must be between 0 and 1, got {shown(value)}")
     return number_value
 
 
@@ -70,7 +76,7 @@ def one_of(*choices: str) -> Check:
     """One of the given words."""
     def checked(where: str, value: Any) -> str:
         if value not in choices:
-            raise fail(where, f"must be one of {', '.join(choices)}, got {value!r}")
+            raise fail(where, f"must be one of {', '.join(choices)}, got {shown(value)}")
         return str(value)
     return checked
 
@@ -78,5 +84,5 @@ def one_of(*choices: str) -> Check:
 def whole(where: str, value: Any) -> int:
     """A whole number >= 0."""
     if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-        raise fail(where, f"expected a whole number >= 0, got {value!r}")
+        raise fail(where, f"expected a whole number >= 0, got {shown(value)}")
     return value

@@ -69,6 +69,7 @@ from physics.validation import (
     line_of,
     load_yaml_file,
     located,
+    shown,
     type_name,
 )
 from physics.world import WORLDS_DIR, World, lidar_overrides, load_world
@@ -317,7 +318,7 @@ def load_suite(path: str | Path) -> Suite:
     entries_list = top["scenarios"]
     where = located(source, top, "scenarios", "scenarios")
     if not isinstance(entries_list, list) or not entries_list:
-        raise fail(where, f"expected a list of scenarios, got {entries_list!r}")
+        raise fail(where, f"expected a list of scenarios, got {shown(entries_list)}")
     if len(entries_list) > MAX_SUITE_SCENARIOS:
         raise fail(where, f"{len(entries_list)} scenarios; at most {MAX_SUITE_SCENARIOS}")
     entries: list[SuiteEntry] = []
@@ -355,7 +356,7 @@ def _scenario_from_suite_file(source: str, folder: Path, entry: Mapping[str, Any
     where = located(source, entry, "file", f"{entry_name}.file")
     reference = entry["file"]
     if not isinstance(reference, str) or not reference:
-        raise fail(where, f"expected a file name, got {reference!r}")
+        raise fail(where, f"expected a file name, got {shown(reference)}")
     path = Path(reference)
     if not path.is_absolute() and (path.suffix or len(path.parts) > 1):
         path = folder / path
@@ -407,7 +408,7 @@ def scenario_from_document(document: Any, *, source: str, folder: Path,
     seed = top.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2 ** 63:
         raise fail(at(top, "seed", "seed"), f"expected a whole number from 0 to 2**63 - 1, "
-                                            f"got {seed!r}")
+                                            f"got {shown(seed)}")
     rate = _controller_rate(at(top, "controller_rate_hz", "controller_rate_hz"),
                             top.get("controller_rate_hz", DEFAULT_CONTROLLER_RATE_HZ))
     parameters = _parameters(source, top, where_prefix)
@@ -470,13 +471,13 @@ def _text(source: str, top: Mapping[str, Any], key: str, default: str,
     value = top.get(key, default)
     if not isinstance(value, str) or len(value) > MAX_TEXT_CHARS:
         raise fail(located(source, top, key, where_prefix + key),
-                   f"expected text of at most {MAX_TEXT_CHARS} characters, got {value!r:.80}")
+                   f"expected text of at most {MAX_TEXT_CHARS} characters, got {shown(value)}")
     return value
 
 
 def _world(where: str, reference: Any, folder: Path) -> World:
     if not isinstance(reference, str) or not reference:
-        raise fail(where, f"expected a shipped world's name or a file, got {reference!r}")
+        raise fail(where, f"expected a shipped world's name or a file, got {shown(reference)}")
     path = Path(reference)
     if not path.suffix and len(path.parts) == 1:
         resolved = WORLDS_DIR / f"{reference}.yaml"
@@ -495,7 +496,7 @@ def _world(where: str, reference: Any, folder: Path) -> World:
 
 def _mode(where: str, mode: Any) -> str:
     if mode not in MODES:
-        raise fail(where, f"must be one of {', '.join(MODES)}, got {mode!r}"
+        raise fail(where, f"must be one of {', '.join(MODES)}, got {shown(mode)}"
                           f"{did_you_mean(mode, MODES)}")
     return str(mode)
 
@@ -549,11 +550,11 @@ def _controller_rate(where: str, value: Any) -> float:
 
 def _parameter_value(where: str, value: Any) -> ParameterValue:
     if isinstance(value, bool) or not isinstance(value, (int, float, str)):
-        raise fail(where, f"expected a number or a word, got {value!r}")
+        raise fail(where, f"expected a number or a word, got {shown(value)}")
     if isinstance(value, str):
         if not PARAMETER_WORD.match(value):
             raise fail(where, f"a text value is one word of letters, digits and _ . + - "
-                              f"(at most 64), got {value!r}")
+                              f"(at most 64), got {shown(value)}")
         return value
     if isinstance(value, float):
         return as_finite_float(where, value)
@@ -574,7 +575,7 @@ def _parameters(source: str, top: Mapping[str, Any],
         here = located(source, mapping, name, f"{where_prefix}parameters.{name}")
         if not isinstance(name, str) or not PARAMETER_NAME.match(name):
             raise fail(here, f"a parameter's name is lower case letters, digits and _, "
-                             f"starting with a letter (at most 48), got {name!r}")
+                             f"starting with a letter (at most 48), got {shown(name)}")
         if name.endswith(CHANGES_SUFFIX):
             raise fail(here, f"a name may not end in '{CHANGES_SUFFIX}': WEBSIM_NAME"
                              f"{CHANGES_SUFFIX.upper()} tells a parameter's changes")
@@ -590,7 +591,7 @@ def _changes(source: str, top: Mapping[str, Any], where_prefix: str, duration_s:
     where = located(source, top, "changes", where_prefix + "changes")
     items = top["changes"]
     if not isinstance(items, list):
-        raise fail(where, f"expected a list, got {type_name(items)} {items!r:.80}")
+        raise fail(where, f"expected a list, got {type_name(items)} {shown(items)}")
     if len(items) > MAX_CHANGES:
         raise fail(where, f"{len(items)} changes; at most {MAX_CHANGES}")
     changes: list[TimedChange] = []
@@ -636,7 +637,7 @@ def _changed_parameters(source: str, entry: Mapping[str, Any], name: str,
         new = _parameter_value(here, value)
         if isinstance(new, str) != isinstance(parameters[key], str):
             kind = "a word" if isinstance(parameters[key], str) else "a number"
-            raise fail(here, f"'{key}' is {kind} (see 'parameters'), got {value!r}")
+            raise fail(here, f"'{key}' is {kind} (see 'parameters'), got {shown(value)}")
         changed.append((str(key), new))
     return tuple(changed)
 
@@ -680,7 +681,7 @@ def _metrics(source: str, top: Mapping[str, Any], where_prefix: str,
     where = located(source, top, "metrics", where_prefix + "metrics")
     items = top["metrics"]
     if not isinstance(items, list) or not items:
-        raise fail(where, f"expected a list of one or more metrics, got {items!r:.80}")
+        raise fail(where, f"expected a list of one or more metrics, got {shown(items)}")
     if len(items) > MAX_METRICS:
         raise fail(where, f"{len(items)} metrics; at most {MAX_METRICS}")
     specs: list[MetricSpec] = []
@@ -743,7 +744,7 @@ def _metric(source: str, here: str, name: str, entry: Mapping[str, Any],
     metric_name = entry.get("name", kind_name)
     if not isinstance(metric_name, str) or not PARAMETER_NAME.match(metric_name):
         raise fail(located(source, entry, "name", f"{name}.name"),
-                   f"a metric's name is lower case letters, digits and _, got {metric_name!r}")
+                   f"a metric's name is lower case letters, digits and _, got {shown(metric_name)}")
     weight = as_non_negative_float(located(source, entry, "weight", f"{name}.weight"),
                                    entry.get("weight", kind.default_weight))
     if math.isinf(weight):

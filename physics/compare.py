@@ -30,8 +30,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
-import yaml
-
 from physics.params import LidarParams, NoiseParams, RobotParams
 from physics.pid import CONTROL_PERIOD_S, HeadingPid, PidGains, wrap_angle
 from physics.shipped import by_name, shipped
@@ -42,6 +40,9 @@ from physics.validation import (
     as_mapping,
     as_positive_float,
     check_keys,
+    parse_yaml,
+    read_text_file,
+    shown,
 )
 from physics.world import World
 
@@ -118,7 +119,7 @@ class HeadingController:
     def __post_init__(self) -> None:
         if self.feedback not in HEADING_FEEDBACK:
             raise ConfigError(f"feedback: must be one of {', '.join(HEADING_FEEDBACK)}, "
-                              f"got {self.feedback!r}")
+                              f"got {shown(self.feedback)}")
 
 
 @dataclass(frozen=True)
@@ -152,21 +153,19 @@ def load_commands(path: str | Path) -> tuple[Segment, ...]:
     source = str(path)
     resolved = resolve_commands_path(path)
     try:
-        text = resolved.read_text(encoding="utf-8")
-    except OSError as error:
+        text = read_text_file(resolved, "command", source=source)
+    except ConfigError as error:
+        if resolved.exists():
+            raise
         known = ", ".join(sorted(shipped.stem for shipped in COMMANDS_DIR.glob("*.yaml")))
-        raise ConfigError(f"{source}: cannot read command file: {error.strerror} "
-                          f"(shipped command files: {known})") from None
+        raise ConfigError(f"{error} (shipped command files: {known})") from None
     if resolved.suffix.lower() == ".csv":
         items: Any = [{key: value for key, value in row.items() if value not in ("", None)}
                       for row in csv.DictReader(text.splitlines())]
         items = [{key: _csv_number(source, index, key, value) for key, value in row.items()}
                  for index, row in enumerate(items)]
     else:
-        try:
-            items = yaml.safe_load(text)
-        except yaml.YAMLError as error:
-            raise ConfigError(f"{source}: not valid YAML: {error}") from None
+        items = parse_yaml(text, source)
     return segments_from_list(items, source=source)
 
 
@@ -180,7 +179,7 @@ def _csv_number(source: str, index: int, key: str, value: str) -> Any:
 def segments_from_list(items: Any, *, source: str = "<commands>") -> tuple[Segment, ...]:
     """Validate a list of segment mappings."""
     if not isinstance(items, list) or not items:
-        raise ConfigError(f"{source}: expected a non-empty list of segments, got {items!r}")
+        raise ConfigError(f"{source}: expected a non-empty list of segments, got {shown(items)}")
     segments = []
     for index, item in enumerate(items):
         where = f"{source}: segment {index + 1}"

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from physics.validation import ConfigError
+from physics.validation import ConfigError, shown
 
 DEFAULT_MAP_RESOLUTION_M = 0.05
 """A map cell's side when the world does not say (``map_resolution_m``): nav2's and
@@ -85,7 +85,7 @@ def check_resolution(where: str, resolution_m: float) -> float:
     if isinstance(resolution_m, bool) or not isinstance(resolution_m, (int, float)) \
             or not math.isfinite(resolution_m) or resolution_m <= 0.0:
         raise ConfigError(f"{where}: a map resolution must be a finite number of metres > 0, "
-                          f"got {resolution_m!r}")
+                          f"got {shown(resolution_m)}")
     return float(resolution_m)
 
 

@@ -16,8 +16,6 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-import yaml
-
 from physics.shipped import CHECKOUT_DIR, shipped
 from physics.validation import (
     ConfigError,
@@ -25,6 +23,8 @@ from physics.validation import (
     as_mapping,
     check_keys,
     fail,
+    load_yaml_file,
+    shown,
 )
 
 PROJECT_DIR = CHECKOUT_DIR
@@ -41,8 +41,7 @@ NO_RETURN_POLICIES = ("range_max", "inf")
 @functools.cache
 def _shipped_defaults() -> Mapping[str, Mapping[str, Any]]:
     """Read the shipped parameter file once; sections are read-only mappings."""
-    with SHIPPED_PARAMS_FILE.open(encoding="utf-8") as stream:
-        document = yaml.safe_load(stream)
+    document = load_yaml_file(SHIPPED_PARAMS_FILE, "parameter")
     return MappingProxyType({name: MappingProxyType(dict(section))
                              for name, section in document.items()})
 
@@ -185,7 +184,7 @@ class LidarParams:
         if isinstance(self.num_rays, bool) or not isinstance(self.num_rays, int) \
                 or not low <= self.num_rays <= high:
             raise fail("num_rays", f"must be a whole number from {low:g} to {high:g}, "
-                                   f"got {self.num_rays!r}")
+                                   f"got {shown(self.num_rays)}")
         _check_ranges(self, [item.name for item in dataclasses.fields(self)
                              if item.name != "num_rays"])
         if self.range_min_m >= self.range_max_m:
@@ -193,7 +192,7 @@ class LidarParams:
                                       f"got {self.range_min_m!r}")
         if self.no_return not in NO_RETURN_POLICIES:
             raise fail("no_return", f"must be one of {', '.join(NO_RETURN_POLICIES)}, "
-                                    f"got {self.no_return!r}")
+                                    f"got {shown(self.no_return)}")
 
     @property
     def angle_increment_rad(self) -> float:
@@ -257,13 +256,7 @@ def load_params(path: str | Path) -> PlatformParams:
             the message names the file and the entry.
     """
     source = str(path)
-    try:
-        with open(path, encoding="utf-8") as stream:
-            document = yaml.safe_load(stream)
-    except OSError as error:
-        raise ConfigError(f"{source}: cannot read parameter file: {error.strerror}") from None
-    except yaml.YAMLError as error:
-        raise ConfigError(f"{source}: not valid YAML: {error}") from None
+    document = load_yaml_file(path, "parameter")
     document = {} if document is None else as_mapping(source, document)
     check_keys(source, document, _SECTIONS)
     sections: dict[str, Any] = {}

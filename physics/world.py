@@ -33,8 +33,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from physics.map_grid import (
     DEFAULT_MAP_RESOLUTION_M,
     check_resolution,
@@ -52,6 +50,9 @@ from physics.validation import (
     as_positive_float,
     check_keys,
     fail,
+    load_yaml_file,
+    shown,
+    type_name,
 )
 
 WORLDS_DIR = shipped("physics", "worlds")
@@ -208,14 +209,12 @@ def load_world(path: str | Path) -> World:
     resolved = resolve_world_path(path)
     source = str(path)
     try:
-        with resolved.open(encoding="utf-8") as stream:
-            document = yaml.safe_load(stream)
-    except OSError as error:
+        document = load_yaml_file(resolved, "world", source=source)
+    except ConfigError as error:
+        if resolved.exists():
+            raise
         known = ", ".join(sorted(p.stem for p in WORLDS_DIR.glob("*.yaml")))
-        raise ConfigError(f"{source}: cannot read world file: {error.strerror} "
-                          f"(shipped worlds: {known})") from None
-    except yaml.YAMLError as error:
-        raise ConfigError(f"{source}: not valid YAML: {error}") from None
+        raise ConfigError(f"{error} (shipped worlds: {known})") from None
     return world_from_dict(document, source=source)
 
 
@@ -225,7 +224,7 @@ def world_from_dict(document: Any, *, source: str = "<world>") -> World:
     check_keys(source, top, _TOP_LEVEL_KEYS)
     name = top.get("name", Path(source).stem)
     if not isinstance(name, str):
-        raise fail(f"{source}: name", f"expected text, got {name!r}")
+        raise fail(f"{source}: name", f"expected text, got {shown(name)}")
     start = Pose2D(*as_number_list(f"{source}: start", top.get("start", [0, 0, 0]), 3))
 
     walls: list[Wall] = []
@@ -268,7 +267,7 @@ def world_from_dict(document: Any, *, source: str = "<world>") -> World:
 def _localization(source: str, value: Any) -> str:
     if value not in LOCALIZATIONS:
         raise fail(f"{source}: localization", f"must be one of {', '.join(LOCALIZATIONS)}, "
-                                              f"got {value!r}")
+                                              f"got {shown(value)}")
     return str(value)
 
 
@@ -319,7 +318,7 @@ def _as_list(source: str, top: Any, key: str) -> list[Any]:
     if value is None:
         return []
     if not isinstance(value, list):
-        raise fail(f"{source}: {key}", f"expected a list, got {type(value).__name__} {value!r}")
+        raise fail(f"{source}: {key}", f"expected a list, got {type_name(value)} {shown(value)}")
     return value
 
 
@@ -336,12 +335,12 @@ def _polyline_walls(source: str, where: str, entry: Any) -> list[Wall]:
     raw_points = mapping.get("points")
     if not isinstance(raw_points, list) or len(raw_points) < 2:
         raise fail(f"{source}: {where}.points", f"expected a list of 2 or more [x, y] points, "
-                   f"got {raw_points!r}")
+                   f"got {shown(raw_points)}")
     points = [as_number_list(f"{source}: {where}.points[{i}]", point, 2)
               for i, point in enumerate(raw_points)]
     closed = mapping.get("closed", False)
     if not isinstance(closed, bool):
-        raise fail(f"{source}: {where}.closed", f"expected true or false, got {closed!r}")
+        raise fail(f"{source}: {where}.closed", f"expected true or false, got {shown(closed)}")
     if closed and len(points) >= 3:
         points.append(points[0])
     return [_checked_wall(source, Wall(a[0], a[1], b[0], b[1], f"{where}.points[{i}]"))
@@ -355,7 +354,7 @@ def _box(source: str, where: str, entry: Any) -> BoxObstacle:
     width, height = as_number_list(f"{source}: {where}.size", mapping.get("size"), 2)
     for label, value in (("width", width), ("height", height)):
         if value <= 0.0:
-            raise fail(f"{source}: {where}.size", f"{label} must be > 0, got {value!r}")
+            raise fail(f"{source}: {where}.size", f"{label} must be > 0, got {shown(value)}")
     yaw = as_finite_float(f"{source}: {where}.yaw", mapping.get("yaw", 0.0))
     return BoxObstacle(cx, cy, width, height, yaw, where)
 

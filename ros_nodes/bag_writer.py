@@ -48,6 +48,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.rosbag2.storage_mcap import Channel, McapWriter, write_channel, write_string
 
+from physics.validation import load_yaml_file, parse_yaml, plain_data
 from ros_nodes.robot_interface import QOS_PROFILES, RECORDED_TOPICS, QosProfile
 from rosbridge.msgs import cdr, definitions
 
@@ -124,7 +125,7 @@ class _McapStorage(McapWriter):
 
     def close(self, version: int, metadata: str) -> None:
         """Close with the ``rosbag2`` record's ``ros_distro`` set to ``ROS_DISTRO``."""
-        record = yaml.safe_load(metadata)
+        record = plain_data(parse_yaml(metadata, "the bag's rosbag2 metadata record"))
         record["ros_distro"] = ROS_DISTRO
         super().close(version, yaml.safe_dump(record, sort_keys=False).strip())
 
@@ -136,7 +137,7 @@ class _Writer(Writer):
     def close(self) -> None:
         """Close the storage and write ``metadata.yaml`` with ``ros_distro`` set."""
         super().close()
-        text = yaml.safe_load(self.metapath.read_text(encoding="utf-8"))
+        text = plain_data(load_yaml_file(self.metapath, "recording metadata"))
         text["rosbag2_bagfile_information"]["ros_distro"] = ROS_DISTRO
         temporary = self.metapath.with_suffix(".yaml.tmp")
         temporary.write_text(yaml.safe_dump(text, sort_keys=False), encoding="utf-8")

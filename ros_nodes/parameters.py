@@ -14,7 +14,7 @@ from typing import Any
 
 from physics import MODES, ConfigError, NoiseParams, RobotParams, Simulation
 from physics.params import field_range, field_unit
-from physics.validation import as_finite_float, as_float_in_range
+from physics.validation import as_finite_float, as_float_in_range, shown
 from physics.world import LOCALIZATIONS
 from rosbridge.msgs.values import Base64Bytes, Message
 
@@ -260,12 +260,12 @@ def value_from_parameter_value(msg: Any) -> Any:
         ConfigError: not a ParameterValue, or an unknown type code.
     """
     if not isinstance(msg, Mapping):
-        raise ConfigError(f"value: expected a ParameterValue object, got {msg!r}")
+        raise ConfigError(f"value: expected a ParameterValue object, got {shown(msg)}")
     type_code = msg.get("type")
     if type_code == PARAMETER_NOT_SET:
         return None
     if isinstance(type_code, bool) or type_code not in _VALUE_FIELDS:
-        raise ConfigError(f"value.type: unknown ParameterType {type_code!r}")
+        raise ConfigError(f"value.type: unknown ParameterType {shown(type_code)}")
     field = _VALUE_FIELDS[type_code]
     if field not in msg:
         raise ConfigError(f"value.{field}: missing for type {type_code}")

@@ -16,8 +16,17 @@ tap: the feeder's pickling (about 10 µs a message, in batches that hold the loc
 under a millisecond) and the garbage collector's visits to messages kept until the feeder
 takes them (measured at 40 robots: ``benchmarks/bench_recording.py``).
 
+What clients add to a robot's bag is bounded per minute (``client_bytes_per_minute``, a
+parameter of the ``Recorder`` and of each ``Recording``; ``--record-client-mb-per-min``):
+the commands they send (``/cmd_vel``, whose ``TwistStamped`` header may carry a long frame
+name; whatever crosses the tap but the robot's periodic topics). Beyond it their messages are
+left out of the bag (counted, said once in the log and on the dashboard) while the robot's
+own topics (its sensors, at their rates: the README's 0.9 MB per robot-minute) go on
+recording. Before, a student's own traffic grew the bag at 3.2 MB/s until its cap stopped it.
+
 A bag that cannot go on (a full disk, ``--record-max-mb``) stops alone, with one log line;
-the simulation and the other recordings go on. ``close`` (at shutdown) writes what is queued
+the simulation and the other recordings go on; the dashboard says so on the robot's card
+(``Recording.notice``). ``close`` (at shutdown) writes what is queued
 and closes every bag properly; if the server dies instead, the writer closes every bag when
 its pipe ends. The writer is a ``spawn`` process: a script that starts a ``Recorder`` must
 guard its main code with ``if __name__ == "__main__"`` (``websim``'s entry points do).
@@ -37,6 +46,7 @@ import multiprocessing
 import pickle
 import threading
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from multiprocessing.connection import Connection
@@ -68,6 +78,14 @@ CLOSE_TIMEOUT_S = 30.0
 DEFAULT_MAX_MB = 1000.0
 """Largest bag (MB on disk) by default (``--record-max-mb``): then it is closed, complete."""
 
+DEFAULT_CLIENT_MB_PER_MIN = 1.0
+"""What clients may add to one robot's bag per minute of its clock, by default (MB; a
+teleop page or a 50 Hz controller sends under 0.3): ``--record-client-mb-per-min``."""
+
+OWN_TOPICS = frozenset(spec.name for spec in RECORDED_TOPICS
+                       if spec.direction == "out" and spec.every_ticks > 0)
+"""The robot's periodic topics: what it publishes whatever its clients do, never bounded."""
+
 ROBOT_JSON_KEY = "robot_json"
 """The bag's ``custom_data`` entry holding the robot's ``robot.json`` (what ``websim replay``
 serves the page)."""
@@ -96,6 +114,8 @@ class RecordingStats:
         reason: why it stopped; empty otherwise.
         summary: the writer's last word on the bag (``BagSummary`` as a dict), once stopped
             or closed.
+        clients_left_out: messages of its clients left out: over their per-minute bound.
+        clients_left_out_bytes: about what they would have added (bytes, as CDR).
     """
 
     queued: int = 0
@@ -105,6 +125,22 @@ class RecordingStats:
     state: str = "recording"
     reason: str = ""
     summary: dict[str, Any] = field(default_factory=dict)
+    clients_left_out: int = 0
+    clients_left_out_bytes: int = 0
+
+
+def message_bytes(value: Any) -> int:
+    """About what a message takes as CDR (bytes): 8 a number, 4 + the length a text or a list.
+
+    Cheap and bounded by the message (a client's, already within the frame limit).
+    """
+    if isinstance(value, (str, bytes, bytearray)):
+        return 4 + len(value)
+    if isinstance(value, Mapping):
+        return sum(message_bytes(item) for item in value.values())
+    if isinstance(value, (list, tuple)):
+        return 4 + sum(message_bytes(item) for item in value)
+    return 8
 
 
 class Recording:
@@ -116,10 +152,15 @@ class Recording:
         path: the bag's folder.
         robot: the robot recorded.
         max_queued: most messages waiting for the writer.
+        client_bytes_per_minute: what its clients' messages may add to the bag per minute
+            of the robot's clock (bytes, as CDR; a minute's worth at once at most); None: no
+            bound.
     """
 
     def __init__(self, rid: int, name: str, path: Path, robot: VirtualRobot,
-                 max_queued: int = MAX_QUEUED_MESSAGES) -> None:
+                 max_queued: int = MAX_QUEUED_MESSAGES,
+                 client_bytes_per_minute: int | None = int(DEFAULT_CLIENT_MB_PER_MIN * 1e6)
+                 ) -> None:
         self.rid = rid
         self.name = name
         self.path = path
@@ -133,24 +174,74 @@ class Recording:
         """False once the recording stopped or closed: the tap's messages are ignored."""
         self.open_command: tuple[Any, ...] | None = None
         """What starts its bag in the writer process; None once sent."""
-        for spec, msg in robot.latched():
+        self.client_bytes_per_minute = client_bytes_per_minute
+        self._client_allowance = float(client_bytes_per_minute or 0)
+        self._allowance_s = self._clock.stamp_s()
+        self._said_s: float | None = None
+        for spec, msg in robot.latched():  # the robot's own, however large its /map
             if spec.recorded:
-                self.on_message("out", spec.name, spec.type, msg, robot.sim.time_s)
+                self._queue(spec.name, spec.type, msg, self._clock.stamp_s())
         robot.tap.add(self.on_message)
 
     def on_message(self, direction: str, topic: str, type_name: str, msg: Message,
                    sim_time_s: float) -> None:
         """The robot's tap: queue a recorded topic's message, stamped by the robot's clock.
 
-        Runs in the tick: one append, or one count when the queue is full.
+        Runs in the tick: one append, or one count when the queue is full or when its
+        clients are over their per-minute bound (what they send, or make the robot send).
         """
         if topic not in self._topics or not self.accepting:
             return
+        now_s = self._clock.stamp_s()
+        if topic in OWN_TOPICS or self._clients_may_add(msg, now_s):
+            self._queue(topic, type_name, msg, now_s)
+
+    def _queue(self, topic: str, type_name: str, msg: Message, now_s: float) -> None:
         if len(self.queue) >= self._max_queued:
             self.stats.lost += 1
             return
-        self.queue.append((self.rid, stamp_ns(self._clock.stamp_s()), topic, type_name, msg))
+        self.queue.append((self.rid, stamp_ns(now_s), topic, type_name, msg))
         self.stats.queued += 1
+
+    def _clients_may_add(self, msg: Message, now_s: float) -> bool:
+        """Charge a message of the clients' to their allowance; whether it fits.
+
+        The allowance refills at ``client_bytes_per_minute`` a minute of the robot's clock
+        and holds a minute's worth at most. Leaving messages out is said in the log at most
+        once a minute.
+        """
+        per_minute = self.client_bytes_per_minute
+        if per_minute is None:
+            return True
+        size = message_bytes(msg)
+        elapsed_s = max(0.0, now_s - self._allowance_s)
+        self._allowance_s = now_s
+        self._client_allowance = min(float(per_minute),
+                                     self._client_allowance + elapsed_s * per_minute / 60.0)
+        if size <= self._client_allowance:
+            self._client_allowance -= size
+            return True
+        self.stats.clients_left_out += 1
+        self.stats.clients_left_out_bytes += size
+        if self._said_s is None or now_s - self._said_s >= 60.0:
+            self._said_s = now_s
+            log.warning("recording of %s: its clients' messages add more than %g MB a minute "
+                        "to its bag: they are left out until they send less (%d so far); "
+                        "the robot's own topics go on recording", self.name, per_minute / 1e6,
+                        self.stats.clients_left_out)
+        return False
+
+    def notice(self) -> str | None:
+        """What the dashboard says of this recording, if anything is wrong with it."""
+        stats = self.stats
+        if stats.state == "stopped":
+            return f"recording stopped: {stats.reason}"
+        if stats.clients_left_out:
+            return (f"recording: {stats.clients_left_out} client messages left out (over "
+                    f"{(self.client_bytes_per_minute or 0) / 1e6:g} MB a minute)")
+        if stats.lost:
+            return f"recording: {stats.lost} messages lost (the writer fell behind)"
+        return None
 
     def detach(self) -> None:
         """Stop listening to the robot (from the thread that ticks it)."""
@@ -165,6 +256,9 @@ class Recording:
                                   "messages_waiting": len(self.queue)}
         if stats.reason:
             report["reason"] = stats.reason
+        if stats.clients_left_out:
+            report["client_messages_left_out"] = stats.clients_left_out
+            report["client_bytes_left_out"] = stats.clients_left_out_bytes
         return report
 
 
@@ -197,13 +291,18 @@ class Recorder:
         max_bytes: a bag reaching this size on disk is closed (complete); None: no limit.
         max_queued: most messages one recording keeps waiting for the writer.
         custom_data: added to every bag's ``custom_data`` (strings).
+        client_bytes_per_minute: what clients may add to each bag per minute
+            (``Recording``); None: no bound (a graded run sets its own).
     """
 
     def __init__(self, directory: Path, *, max_bytes: int | None = int(DEFAULT_MAX_MB * 1e6),
                  max_queued: int = MAX_QUEUED_MESSAGES,
-                 custom_data: dict[str, str] | None = None) -> None:
+                 custom_data: dict[str, str] | None = None,
+                 client_bytes_per_minute: int | None = int(DEFAULT_CLIENT_MB_PER_MIN * 1e6)
+                 ) -> None:
         self.directory = directory
         self.max_bytes = max_bytes
+        self.client_bytes_per_minute = client_bytes_per_minute
         self._max_queued = max_queued
         self._custom_data = dict(custom_data or {})
         self.recordings: list[Recording] = []
@@ -226,7 +325,8 @@ class Recorder:
         """
         started = datetime.now(timezone.utc)
         path = self._new_folder(directory or self.directory, name, started)
-        recording = Recording(len(self.recordings), name, path, robot, self._max_queued)
+        recording = Recording(len(self.recordings), name, path, robot, self._max_queued,
+                              self.client_bytes_per_minute)
         sim = robot.sim
         data = {**self._custom_data, "robot": name, "world": sim.world.name, "mode": sim.mode,
                 "started_utc": started.isoformat(timespec="seconds"),

@@ -262,7 +262,10 @@ class RobotHost:
         """What the instructor's dashboard shows of this robot, a fixed set of fields.
 
         ``client_count`` and ``admin_count`` (clients with the robot's or the instructor's
-        token), ``last_driver`` (the address of the client whose /cmd_vel the robot took last)
+        token), of which ``owner_count`` (the robot's own token: its student's page and code)
+        and ``instructor_count`` (the instructor's token: the dashboard itself is one),
+        ``recording`` (what is wrong with its recording, if anything: ``Recording.notice``;
+        None), ``last_driver`` (the address of the client whose /cmd_vel the robot took last)
         and ``last_drive_age_s`` (how long ago, s, by the robot's clock), ``collisions``,
         ``mode``, ``mass_kg``, ``inertia_kg_m2``, ``paused`` (not ticking: held or idle),
         ``held`` (by the instructor), ``speed_mps``. Each field a number, a string or None:
@@ -274,6 +277,10 @@ class RobotHost:
         return {
             "client_count": len(sessions),
             "admin_count": sum(1 for session in sessions if session.is_admin),
+            "owner_count": sum(1 for session in sessions
+                               if session.is_admin and not session.instructor),
+            "instructor_count": sum(1 for session in sessions if session.instructor),
+            "recording": None if self.recording is None else self.recording.notice(),
             "last_driver": self.endpoint.last_driver,
             "last_drive_age_s": None if drive_s is None
             else round(self._clock.monotonic_s() - drive_s, 3),
@@ -321,6 +328,8 @@ class RobotHost:
             "clients": len(sessions),
             "queued_frames": sum(len(session.outbox) for session in sessions),
             "queued_bytes": sum(session.outbox.queued_bytes for session in sessions),
+            "frames_dropped": sum(session.outbox.dropped for session in sessions),
+            "frames_sent": sum(session.outbox.sent for session in sessions),
             "sim_time_s": round(self.robot.sim.time_s, 3),
             "speed": speed_text(self.schedule.speed),
             "clients_released": self.schedule.clients_released,

@@ -16,7 +16,7 @@ from typing import Any
 
 from physics import ConfigError, LaserScan, Odometry, World
 from physics.occupancy import OccupancyGrid, rasterise
-from physics.validation import as_finite_float
+from physics.validation import as_finite_float, shown
 from rosbridge.msgs.values import Base64Bytes, Float32Sequence, Message, stamp, typed_sequence
 
 ODOM_FRAME = "odom"
@@ -318,5 +318,5 @@ def _field(msg: Any, name: str, type_name: str) -> Mapping[str, Any]:
         raise ConfigError(f"{type_name}: expected an object, got {type(msg).__name__}")
     value = msg.get(name, {})
     if not isinstance(value, Mapping):
-        raise ConfigError(f"{name}: expected an object, got {type(value).__name__} {value!r}")
+        raise ConfigError(f"{name}: expected an object, got {type(value).__name__} {shown(value)}")
     return value

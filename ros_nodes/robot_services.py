@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from physics import ConfigError
+from physics.validation import shown
 from ros_nodes.parameters import (
     PARAMETER_DOUBLE,
     PARAMETER_INTEGER,
@@ -61,7 +62,7 @@ def add_robot_services(bridge: Bridge, robot: VirtualRobot) -> RobotLog:
         require_admin(session, "set_parameters")
         entries = args.get("parameters", [])
         if not isinstance(entries, list):
-            raise ServiceError(f"parameters: expected a list, got {entries!r}")
+            raise ServiceError(f"parameters: expected a list, got {shown(entries)}")
         results = []
         for index, entry in enumerate(entries):
             try:

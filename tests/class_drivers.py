@@ -31,11 +31,9 @@ TWIST = json.dumps({"op": "publish", "topic": "/cmd_vel", "type": "geometry_msgs
 
 
 def robot_urls(links_csv: str) -> list[str]:
-    """Each robot's WebSocket URL with its token, from a links file's robot rows (the
-    ``#instructor`` row is the dashboard's)."""
+    """Each robot's WebSocket URL with its token, from a links file (the handout)."""
     with open(links_csv, newline="", encoding="utf-8") as links:
-        return [f"{row['websocket']}?token={row['token']}" for row in csv.DictReader(links)
-                if not row["name"].startswith("#")]
+        return [f"{row['websocket']}?token={row['token']}" for row in csv.DictReader(links)]
 
 
 async def drive(ws: websockets.ClientConnection, start_s: float, stop_s: float) -> None:

@@ -101,16 +101,18 @@ def limit_open_files(limit: int) -> None:
 def start_server(extra_args: Sequence[str] = (), ws_port: int | None = None,
                  http_port: int | None = None, open_files: int | None = None,
                  launcher: Sequence[str] = (sys.executable, "-m", "websim.cli"),
-                 cwd: str | None = None) -> ServerProcess:
+                 cwd: str | None = None,
+                 admin_token: str | None = ADMIN_TOKEN) -> ServerProcess:
     """Launch ``websim serve`` (``launcher``: ``python -m websim.cli``) and wait until healthy.
 
     ``open_files`` limits the server process to that many file descriptors (soft and hard);
-    ``cwd``: the folder it runs in (default this one).
+    ``cwd``: the folder it runs in (default this one); ``admin_token``: its
+    ``--admin-token`` (None: none given).
     """
     ws_port = ws_port or free_port()
     http_port = http_port or free_port()
     command = [*launcher, "serve", "--ws-port", str(ws_port), "--http-port", str(http_port),
-               "--admin-token", ADMIN_TOKEN, *extra_args]
+               *(("--admin-token", admin_token) if admin_token else ()), *extra_args]
     preexec = None if open_files is None else functools.partial(limit_open_files, open_files)
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                text=True, env={**os.environ, "PYTHONUNBUFFERED": "1",

@@ -10,6 +10,8 @@ import itertools
 import pytest
 from bridge_rig import Rig
 
+from rosbridge.core.outbox import Outbox
+
 
 @pytest.fixture
 def rig() -> Rig:
@@ -77,3 +79,54 @@ def test_throttle_never_sends_closer_than_the_rate_less_jitter(rig: Rig) -> None
     gaps = [b - a for a, b in itertools.pairwise(sent_at)]
     assert min(gaps) >= 0.195
     assert len(sent_at) == 15, "5 Hz over 3 s despite the jitter"
+
+
+# ---- the byte budget drops the oldest topic frames, never the reader -------------------------
+
+MEGABYTE = "x" * 1_000_000
+
+
+def test_a_burst_beyond_the_byte_budget_keeps_the_newest_frames_and_never_overflows() -> None:
+    """32 publishers bursting 1 MB each closed a subscriber that read at full speed: its
+    outbox overflowed on what others sent. Now the oldest frames make room."""
+    for queue_length in (0, 10):
+        outbox = Outbox(max_bytes=4 << 20)
+        for number in range(32):
+            outbox.put_topic("/flood", f"{number:02d}{MEGABYTE}", queue_length)
+        assert outbox.overflowed is None
+        assert outbox.queued_bytes <= 4 << 20
+        frames = outbox.take(1 << 30)
+        assert [frame[:2] for frame in frames] == ["28", "29", "30", "31"], "the newest"
+        assert outbox.dropped == 28
+
+
+def test_the_oldest_frames_of_any_topic_make_room_and_replies_are_kept() -> None:
+    outbox = Outbox(max_bytes=3_500_000)
+    outbox.put_topic("/a", f"a1{MEGABYTE}", 0)
+    outbox.put_reply('{"op": "service_response"}')
+    outbox.put_topic("/b", f"b1{MEGABYTE}", 0)
+    outbox.put_topic("/a", f"a2{MEGABYTE}", 0)
+    outbox.put_topic("/b", f"b2{MEGABYTE}", 0)
+    assert outbox.overflowed is None
+    assert [frame[:2] for frame in outbox.take(1 << 30)] == ['{"', "b1", "a2", "b2"]
+
+
+def test_replies_past_the_byte_budget_still_overflow() -> None:
+    outbox = Outbox(max_bytes=2_500_000)
+    outbox.put_topic("/a", f"a1{MEGABYTE}", 0)
+    outbox.put_reply(f"r1{MEGABYTE}")
+    outbox.put_reply(f"r2{MEGABYTE}")
+    assert outbox.overflowed is None, "the topic frame made room"
+    outbox.put_reply(f"r3{MEGABYTE}")
+    assert outbox.overflowed is not None and "bytes of replies" in outbox.overflowed
+
+
+def test_a_half_sent_fragmented_message_is_never_dropped() -> None:
+    outbox = Outbox(max_bytes=2_500_000)
+    fragments = tuple(f"f{index}{'y' * 499_998}" for index in range(4))
+    outbox.put_topic("/big", fragments, 0)
+    assert outbox.pop() == fragments[0]
+    outbox.put_topic("/big", f"n1{MEGABYTE}", 0)
+    outbox.put_topic("/other", f"o1{MEGABYTE}", 0)
+    assert [frame[:2] for frame in outbox.take(1 << 30)] == ["f1", "f2", "f3", "o1"], \
+        "the rest of the half-sent message first, then the newest that fits"

@@ -35,7 +35,7 @@ from classroom.registry import (
 from physics import ConfigError, Simulation, load_world
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.session import Session
-from websim.sites import INSTRUCTOR_ROW
+from websim.sites import instructor_links_path
 
 from server_process import ADMIN_TOKEN, ServerProcess, start_server, wait_for
 
@@ -221,12 +221,44 @@ def test_unknown_names_and_the_root_are_refused_with_a_reason(server: ServerProc
     assert status == 403 and body.startswith("wrong instructor token")  # not a 404
 
 
+def test_a_wrong_name_is_refused_with_what_is_wrong_and_never_a_classmates_name(
+        server: ServerProcess) -> None:
+    """A student who mistyped their robot's name got "404 Not Found" (roslibpy prints the
+    status line); the names close to theirs are classmates': only the instructor's log
+    names them."""
+    async def refused(url: str) -> tuple[int, str, str]:
+        with pytest.raises(websockets.InvalidStatus) as error:
+            async with websockets.connect(url):
+                pass
+        response = error.value.response
+        return response.status_code, response.reason_phrase, response.body.decode()
+
+    for name, reason in (("carl", "no robot named 'carl' in this class"),
+                         ("Alice", "'Alice' is not a robot name"),
+                         ("", "this address names no robot: a robot is at /robots/NAME")):
+        status, phrase, body = asyncio.run(refused(robot_url(server, name)))
+        assert status == 404 and phrase.startswith(reason) and body.startswith(reason), phrase
+        assert "your instructor's links give" in body
+        page_status, page = get(f"{server.http_url}/robots/{name}/")
+        assert page_status == 404 and reason in page, page
+        for classmate in ("alice", "bob", "carol"):  # case matters: 'Alice' is what they typed
+            assert classmate not in body and classmate not in page, (name, body, page)
+        assert "Traceback" not in page
+    status, page = get(f"{server.http_url}/robots")
+    assert status == 404 and "this address names no robot" in page
+    status, page = get(f"{server.http_url}/")  # was a robot page that could never connect
+    assert status == 200 and "This server hosts a class" in page and "/robots/NAME/" in page
+
+
 def test_each_robot_token_is_admin_on_its_robot_only(server: ServerProcess,
                                                     links: Path) -> None:
     rows = {row["name"]: row for row in csv.DictReader(links.open())}
-    assert list(rows) == ["alice", "bob", "carol", "#instructor"]  # last: the dashboard
-    assert rows["#instructor"]["page"].endswith(f":{server.http_port}/class?token={ADMIN_TOKEN}")
-    assert rows["#instructor"]["token"] == ADMIN_TOKEN
+    assert list(rows) == ["alice", "bob", "carol"]  # the handout: the robots only
+    assert ADMIN_TOKEN not in links.read_text()
+    private = dict(line.split("=", 1) for line in
+                   instructor_links_path(links).read_text().splitlines()[1:])
+    assert private["dashboard"].endswith(f":{server.http_port}/class?token={ADMIN_TOKEN}")
+    assert private["token"] == ADMIN_TOKEN
     assert rows["carol"]["token"] == CAROL_TOKEN
     alice_token = rows["alice"]["token"]
     assert rows["alice"]["admin_page"].endswith(f"/robots/alice/admin?token={alice_token}")
@@ -265,10 +297,8 @@ def test_each_robot_has_its_page_and_the_page_learns_its_bridge(server: ServerPr
     assert robot["topics"]["cmd_vel"]["name"] == "/cmd_vel"
     status, body = get(f"{server.http_url}/robots/nobody/")
     assert status == 404 and "no robot named 'nobody'" in body
-    status, body = get(f"{server.http_url}/robots/Bob/")  # wrongly cased: the right one named
-    assert status == 404 and "did you mean bob?" in body
-    status, body = get(f"{server.http_url}/robots/carl/")  # a near miss
-    assert status == 404 and "did you mean carol?" in body
+    status, body = get(f"{server.http_url}/robots/Bob/")  # wrongly cased: no name given away
+    assert status == 404 and "'Bob' is not a robot name" in body and "bob" not in body
     with urllib.request.urlopen(f"{server.http_url}/robots/bob", timeout=5) as response:
         assert response.url.endswith("/robots/bob/")  # redirected: relative URLs need the /
 
@@ -472,8 +502,7 @@ def test_students_cannot_ask_for_status_or_pause(server: ServerProcess) -> None:
 
 def test_robot_tokens_derive_from_the_class_secret_not_the_instructor_token(
         server: ServerProcess, links: Path) -> None:
-    rows = {row["name"]: row["token"] for row in csv.DictReader(links.open())
-            if row["name"] != INSTRUCTOR_ROW}
+    rows = {row["name"]: row["token"] for row in csv.DictReader(links.open())}
     assert rows["alice"] != derived_token(ADMIN_TOKEN, "alice")  # no offline guessing
     assert len(rows["alice"]) == 24 and len(set(rows.values())) == 3
     assert rows["carol"] == CAROL_TOKEN  # the roster's own token wins
@@ -592,10 +621,45 @@ def test_an_invalid_or_mistyped_name_is_refused_for_what_it_is(tmp_path: Path) -
                        idle_pause_s=None, lazy=True)
     front = ClassServer(roster, ADMIN_TOKEN)
     assert front.find("/robots/Bad.Name") == \
-        "'Bad.Name' is not a robot name (1 to 32 of a-z, 0-9, _ and -)"
-    assert front.find("/robots/Alice") == \
-        "'Alice' is not a robot name (1 to 32 of a-z, 0-9, _ and -); did you mean alice?"
+        "'Bad.Name' is not a robot name (1 to 32 of a-z, 0-9, _ and -); your instructor's " \
+        "links give your robot's"
+    assert front.find("/robots/Alice").startswith("'Alice' is not a robot name")
+    assert front.log_hint("/robots/Alice") == " (names close to it: alice)"
     closed = ClassServer(Classroom([Student("carol")], make_robot, idle_pause_s=None,
                                    lazy=True), ADMIN_TOKEN)
-    assert closed.find("/robots/carl") == "no robot named 'carl' in this class; " \
-                                          "did you mean carol?"
+    assert closed.find("/robots/carl") == "no robot named 'carl' in this class; your " \
+                                          "instructor's links give your robot's name"
+    assert closed.log_hint("/robots/carl") == " (names close to it: carol)"
+    assert closed.log_hint("/robots/zzzzzz") == ""
+
+
+def test_tokenless_watchers_cannot_take_a_robots_tf_republisher_from_its_owner(
+        server: ServerProcess) -> None:
+    """Eight sockets without a token ask bob's TF republisher for all 64 republications (as
+    ros3djs pages would): they get the watchers' share; bob's own page still gets its own."""
+    request = {"source_frames": ["base_link"], "target_frame": "odom", "angular_thres": 0.0,
+               "trans_thres": 0.0, "rate": 10.0}
+
+    async def attack() -> tuple[int, str, dict[str, Any]]:
+        watchers = [await websockets.connect(robot_url(server, "bob")) for _ in range(8)]
+        granted, refusal = 0, ""
+        try:
+            for ws in watchers:
+                for number in range(8):
+                    await ws.send(json.dumps({"op": "call_service", "id": f"w{number}",
+                                              "service": "/republish_tfs", "args": request}))
+                    while True:
+                        reply = json.loads(await asyncio.wait_for(ws.recv(), 5))
+                        if reply.get("op") == "service_response":
+                            break
+                    granted += bool(reply["result"])
+                    refusal = refusal or ("" if reply["result"] else str(reply["values"]))
+            owner = await call(owner_url(server, "bob"), "/republish_tfs", request)
+        finally:
+            for ws in watchers:
+                await ws.close()
+        return granted, refusal, owner
+
+    granted, refusal, owner = asyncio.run(attack())
+    assert granted == 48 and "are kept for its owner" in refusal
+    assert owner["result"] and owner["values"]["topic_name"].startswith("/tf_repub_")

@@ -33,7 +33,6 @@ from classroom.state import (
 from physics import ConfigError, Simulation, load_world
 from ros_nodes.virtual_robot_core import VirtualRobot
 from websim import cli
-from websim.sites import INSTRUCTOR_ROW
 
 from server_process import ADMIN_TOKEN, start_server, stop_process, wait_for
 
@@ -210,8 +209,7 @@ def test_a_class_killed_with_sigkill_comes_back_within_the_save_interval(
                "--idle-pause", "3600"]
     server = start_server(command)
     try:  # from here on the server goes whatever fails
-        tokens = {row["name"]: row["token"] for row in csv.DictReader(links.open())
-                  if row["name"] != INSTRUCTOR_ROW}  # the robots' rows, not the dashboard's
+        tokens = {row["name"]: row["token"] for row in csv.DictReader(links.open())}
         assert len(tokens) == ROBOTS
         asyncio.run(drive_all(server.ws_port, tokens, 4.0))
         time.sleep(SAVE_INTERVAL_S + 0.5)  # stopped robots: a save has seen them still
@@ -232,8 +230,7 @@ def test_a_class_killed_with_sigkill_comes_back_within_the_save_interval(
     links.unlink()
     again = start_server(command, ws_port=server.ws_port, http_port=server.http_port)
     try:
-        assert {row["name"]: row["token"] for row in csv.DictReader(links.open())
-                if row["name"] != INSTRUCTOR_ROW} == tokens
+        assert {row["name"]: row["token"] for row in csv.DictReader(links.open())} == tokens
         after = asyncio.run(poses(again.ws_port, list(tokens)))
         top_speed = 0.05 + 0.01 * (ROBOTS - 1)
         for name in tokens:
@@ -244,4 +241,117 @@ def test_a_class_killed_with_sigkill_comes_back_within_the_save_interval(
         wait_for(lambda: again.health()["robot_count"] == ROBOTS, 5.0, "every robot back")
     finally:
         again.stop()
-    assert "restored: robots as they were, same tokens" in "".join(again.output)
+    assert f"state:     {state}: restored, saved " in "".join(again.output)
+    assert f"{ROBOTS} robots as they were, the same tokens" in "".join(again.output)
+
+
+# ---- a class's state belongs to one class ----------------------------------------------------
+
+
+def test_two_classes_of_n_robots_from_two_folders_or_ports_keep_two_files(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two sections run as --class 40 by one account shared one file: the class secret (last
+    week's links drove this week's robots) and every enrolment ever made."""
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    monday, tuesday = tmp_path / "monday", tmp_path / "tuesday"
+    monday.mkdir()
+    tuesday.mkdir()
+    one = default_state_path("40", ws_port=9090, folder=monday)
+    assert one == default_state_path("40", ws_port=9090, folder=monday), "a restart finds it"
+    assert one != default_state_path("40", ws_port=9090, folder=tuesday)
+    assert one != default_state_path("40", ws_port=9190, folder=monday)
+    assert one != default_state_path("41", ws_port=9090, folder=monday)
+    assert one.parent == tmp_path / "data" / "websim" and one.name.startswith("class-40-")
+
+
+def test_a_default_file_saved_another_day_starts_anew_unless_named(tmp_path: Path) -> None:
+    path = tmp_path / "state.sqlite"
+    state = ClassState(path, "robots:4", now_s=1_000_000.0)
+    secret = state.secret
+    state.save_robots({}, now_s=1_000_000.0)
+    state.close()
+    hours = 3600.0
+    state = ClassState(path, "robots:4", stale_after_s=12 * hours, now_s=1_000_000 + 11 * hours)
+    assert state.secret == secret and state.stale_s is None, "the same day: a restart"
+    state.save_robots({}, now_s=1_000_000 + 11 * hours)
+    state.close()
+    state = ClassState(path, "robots:4", stale_after_s=12 * hours, now_s=1_000_000 + 40 * hours)
+    assert state.secret != secret and state.stale_s == pytest.approx(29 * hours)
+    state.close()
+    named = ClassState(path, "robots:4", now_s=1_000_000 + 400 * hours)
+    assert named.stale_s is None, "a file the instructor names is kept however old"
+    named.close()
+
+
+def test_an_open_class_forgets_enrolments_nobody_used_for_the_enrolment_time(
+        tmp_path: Path) -> None:
+    """Every open-class enrolment ever made came back at each start (198 robots seen)."""
+    path = tmp_path / "state.sqlite"
+    hours = 3600.0
+    state = ClassState(path, IDENTITY)
+    classroom = Classroom([Student("alice")], make_robot, open_class=True, idle_pause_s=None,
+                          state=state)
+    for name in ("dave", "erin", "fay"):
+        assert classroom.get(name) is not None
+    classroom.save()
+    state.enrol("dave", claimed=True, now_s=time.time() - 13 * hours)  # last week's
+    state.enrol("erin", claimed=True, now_s=time.time() - 11 * hours)
+    state.close()
+
+    state = ClassState(path, IDENTITY)
+    again = Classroom([Student("alice")], make_robot, open_class=True, idle_pause_s=None,
+                      state=state, enrolment_hours=12.0)
+    assert again.forgotten == ["dave"]
+    assert set(dict(again)) == {"alice", "erin", "fay"}
+    assert "dave" not in state.enrolments() and "dave" not in state.robots()
+    assert again.get("dave") is not None and "dave" in again.unclaimed, "the name enrols anew"
+    state.close()
+
+
+def test_a_schema_1_file_is_brought_up_and_keeps_its_enrolments(tmp_path: Path) -> None:
+    path = tmp_path / "old.sqlite"
+    db = sqlite3.connect(path)
+    with db:
+        db.executescript("CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);"
+                         "CREATE TABLE enrolments (name TEXT PRIMARY KEY, "
+                         "claimed INTEGER NOT NULL DEFAULT 0);"
+                         "CREATE TABLE robots (name TEXT PRIMARY KEY, state TEXT NOT NULL);")
+        db.executemany("INSERT INTO meta VALUES (?, ?)", [("schema", "1"), ("class", IDENTITY),
+                                                          ("secret", "s" * 43)])
+        db.execute("INSERT INTO enrolments VALUES ('dave', 1)")
+    db.close()
+    state = ClassState(path, IDENTITY)
+    assert state.secret == "s" * 43 and state.enrolments() == {"dave": True}
+    assert state.forget_enrolments(3600.0) == [], "kept one enrolment time from now"
+    state.close()
+    db = sqlite3.connect(path)
+    assert db.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone() == (
+        str(SCHEMA_VERSION),)
+    db.close()
+
+
+def serve_without_a_token(args: list[str]) -> tuple[str, str]:
+    """Start and stop ``websim serve ARGS`` (no --admin-token); its dashboard token, banner."""
+    server = start_server(args, admin_token=None)
+    server.stop()
+    output = "".join(server.output)
+    dashboard = next(line for line in output.splitlines() if "dashboard:" in line)
+    return dashboard.split("token=")[1].strip(), output
+
+
+def test_the_instructors_token_is_kept_with_the_class_state(tmp_path: Path) -> None:
+    """It changed at every restart unless given, breaking an open dashboard."""
+    state = tmp_path / "class.sqlite"
+    first, output = serve_without_a_token(["--class", "2", "--state", str(state)])
+    assert f"state:     {state}: new" in output
+    second, output = serve_without_a_token(["--class", "2", "--state", str(state)])
+    assert second == first
+    assert "the instructor's token" in next(line for line in output.splitlines()
+                                        if line.startswith("  state:"))
+    third, _ = serve_without_a_token(["--class", "2", "--state", str(state), "--fresh"])
+    assert third != first, "--fresh: a new token too"
+    given, _ = serve_without_a_token(["--class", "2", "--state", str(state), "--admin-token",
+                                      ADMIN_TOKEN])
+    assert given == ADMIN_TOKEN
+    kept, _ = serve_without_a_token(["--class", "2", "--state", str(state)])
+    assert kept == ADMIN_TOKEN, "a token given once is the class's from then on"

@@ -31,8 +31,9 @@ from classroom.registry import (
 from physics import ConfigError, Simulation, load_world
 from ros_nodes.virtual_robot_core import VirtualRobot
 from websim import cli
+from websim.lan import lan_addresses
 from websim.serve import RedactTokens
-from websim.sites import write_links
+from websim.sites import instructor_links_path, write_links
 
 from server_process import ADMIN_TOKEN, start_server
 
@@ -118,8 +119,9 @@ def test_the_links_name_the_host_students_reach(tmp_path: Path) -> None:
         server.stop()
     assert rows[0]["page"].startswith("http://class.example:8080/robots/robot01/#token=")
     assert rows[0]["websocket"] == "ws://class.example:9090/robots/robot01"
-    assert rows[-1]["page"].startswith("http://class.example:8080/class?token=")
-    assert "), at class.example (--public-host" in "".join(server.output)  # the banner says
+    private = instructor_links_path(links).read_text()
+    assert "dashboard=http://class.example:8080/class?token=" in private
+    assert "dashboard: http://class.example:8080/class?token=" in "".join(server.output)
     for bad in ("http://class.example", "class example", "a..example"):
         result = subprocess.run([sys.executable, "-m", "websim.cli", "serve", "--class", "2",
                                  "--public-host", bad], capture_output=True, text=True,
@@ -174,3 +176,55 @@ def test_the_parser_documents_the_token_rule() -> None:
                  if isinstance(action, argparse._SubParsersAction)).choices["serve"]
     help_text = serve.format_help()
     assert "at least 20 characters" in help_text and "--open-drive" in help_text
+
+
+def test_the_handout_holds_no_instructor_token_and_both_files_are_private_lf_text(
+        tmp_path: Path) -> None:
+    """The handout went to students with the instructor's token in its last row; its CRLF
+    line ends put a carriage return at the end of every token a shell read from it."""
+    links = tmp_path / "links.csv"
+    server = start_server(["--class", "3", "--links", str(links)])
+    try:
+        handout, private = links.read_bytes(), instructor_links_path(links).read_bytes()
+    finally:
+        server.stop()
+    assert ADMIN_TOKEN.encode() not in handout
+    assert b"\r" not in handout and b"\r" not in private
+    assert handout.endswith(b"\n") and private.endswith(b"\n")
+    rows = list(csv.DictReader(handout.decode().splitlines()))
+    assert [row["name"] for row in rows] == ["robot01", "robot02", "robot03"]
+    assert all(row["token"] and row["token"] in row["page"] for row in rows)
+    assert private.decode().splitlines()[1:] == [
+        f"dashboard=http://localhost:{server.http_port}/class?token={ADMIN_TOKEN}",
+        f"websocket=ws://localhost:{server.ws_port}/", f"token={ADMIN_TOKEN}"]
+    for path in (links, instructor_links_path(links)):
+        assert stat.S_IMODE(path.stat().st_mode) == 0o600
+    token = subprocess.run(["sh", "-c", f". '{instructor_links_path(links)}' && "
+                                        "printf %s \"$token\""],
+                           capture_output=True, text=True, check=True).stdout
+    assert token == ADMIN_TOKEN, "a shell reads the token as it is"
+    output = "".join(server.output)
+    assert f"links:     {links} to hand out" in output
+    assert f"{instructor_links_path(links)} is yours" in output
+
+
+def test_a_class_on_every_interface_names_the_address_students_reach_everywhere(
+        tmp_path: Path) -> None:
+    """Its links named the machine's host name ('vm'), which students' machines usually
+    cannot resolve, and the banner named three hosts."""
+    addresses = lan_addresses()
+    if not addresses:
+        pytest.skip("this machine has no network address besides loopback")
+    links = tmp_path / "links.csv"
+    server = start_server(["--class", "2", "--host", "0.0.0.0", "--links", str(links)])
+    try:
+        rows = list(csv.DictReader(links.open()))
+    finally:
+        server.stop()
+    host = addresses[0]
+    assert rows[0]["page"].startswith(f"http://{host}:{server.http_port}/robots/robot01/")
+    assert rows[0]["websocket"] == f"ws://{host}:{server.ws_port}/robots/robot01"
+    assert f"dashboard=http://{host}:{server.http_port}/class?token=" in \
+        instructor_links_path(links).read_text()
+    urls = [word for word in "".join(server.output).split() if "://" in word]
+    assert len(urls) >= 4 and all(f"://{host}:" in url for url in urls), urls

@@ -142,22 +142,18 @@ class PageLog:
     websockets: list[str] = field(default_factory=list)
     console_errors: list[str] = field(default_factory=list)
     page_errors: list[str] = field(default_factory=list)
-
-
-def expected_404(msg: Any) -> bool:
-    """The browser's console line for /workers.json's 404: how a single process says it has
-    no workers behind nginx (class-workers.js asks, and then opens the one root)."""
-    return str(msg.location.get("url", "")).endswith("/workers.json")
+    failed_requests: list[str] = field(default_factory=list)
+    """Requests answered 4xx or 5xx (the page's /workers.json was a 404 in one process)."""
 
 
 @contextlib.contextmanager
 def dashboard(browser: Any, server: ServerProcess, token: str | None = ADMIN_TOKEN,
               count: int = CLASS_SIZE, init_script: str | None = None,
-              ) -> Iterator[tuple[Any, PageLog]]:
-    """/class (with ``?token=`` unless None) at 1280 x 800 in a fresh context, its config.json
-    naming ``server``'s bridge; with a token, until ``count`` cards show their robot's pose.
-    ``init_script`` runs in the page before its own scripts."""
-    context = browser.new_context(viewport=VIEWPORT)
+              viewport: dict[str, int] | None = None) -> Iterator[tuple[Any, PageLog]]:
+    """/class (with ``?token=`` unless None) at 1280 x 800 (or ``viewport``) in a fresh
+    context, its config.json naming ``server``'s bridge; with a token, until ``count`` cards
+    show their robot's pose. ``init_script`` runs in the page before its own scripts."""
+    context = browser.new_context(viewport=viewport or VIEWPORT)
     if init_script is not None:
         context.add_init_script(init_script)
     with urllib.request.urlopen(f"{server.http_url}/config.json", timeout=10) as served:
@@ -169,8 +165,10 @@ def dashboard(browser: Any, server: ServerProcess, token: str | None = ADMIN_TOK
         log = PageLog()
         page.on("websocket", lambda websocket: log.websockets.append(websocket.url))
         page.on("console", lambda msg: log.console_errors.append(msg.text)
-                if msg.type == "error" and not expected_404(msg) else None)
+                if msg.type == "error" else None)
         page.on("pageerror", lambda error: log.page_errors.append(str(error)))
+        page.on("response", lambda response: log.failed_requests.append(
+            f"{response.status} {response.url}") if response.status >= 400 else None)
         query = "" if token is None else f"?token={token}"
         page.goto(f"{server.http_url}/class{query}")
         if token is not None:
@@ -270,6 +268,7 @@ def test_every_robot_has_a_card_and_the_card_of_a_driven_robot_says_who(
         assert card(page, "robot03")["error"] == ""
         screenshot(page, "dashboard-12.png", full_page=False)
         assert log.console_errors == [] and log.page_errors == []
+        assert log.failed_requests == [], "one process answers /workers.json itself"
 
 
 @needs_browser
@@ -471,3 +470,68 @@ def test_a_cards_token_button_shows_that_robots_token_on_request(
         assert token == TOKENS["robot04"]
         assert message.startswith("robot04's token, for its student only")
         assert log.page_errors == []
+
+
+BUTTONS_CUT = """() => {
+    const cut = [];
+    for (const button of document.querySelectorAll('.robot-actions button')) {
+        const card = button.closest('.robot-card').getBoundingClientRect();
+        const box = button.getBoundingClientRect();
+        if (button.scrollWidth > button.clientWidth || box.left < card.left - 0.5
+                || box.right > card.right + 0.5) {
+            cut.push(`${button.closest('[data-robot]').dataset.robot}: ${button.textContent}`);
+        }
+    }
+    return cut;
+}"""
+"""Every card button whose label does not fit it, or that sticks out of its card."""
+
+
+@needs_browser
+@pytest.mark.parametrize("viewport", [{"width": 1280, "height": 800},
+                                      {"width": 1366, "height": 768}],
+                         ids=["1280x800", "1366x768"])
+def test_every_cards_buttons_show_their_whole_labels_on_a_laptop(
+        server: ServerProcess, browser: Any, viewport: dict[str, int]) -> None:
+    """At 1280 px the labels were cut to "R..." and "Pa...": Reset and Pause looked alike."""
+    with dashboard(browser, server, viewport=viewport) as (page, log):
+        assert page.evaluate(BUTTONS_CUT) == []
+        labels = page.eval_on_selector_all('[data-robot="robot01"] .robot-actions button',
+                                           "buttons => buttons.map(b => b.textContent)")
+        assert labels == ["Reset", "Pause", "Dynamic", "Payload ×2", "Token"]
+        width = page.evaluate("() => document.documentElement.scrollWidth")
+        assert width <= viewport["width"], "no sideways scrolling"
+        screenshot(page, f"dashboard-{viewport['width']}x{viewport['height']}.png",
+                   full_page=False)
+        assert log.console_errors == [] and log.page_errors == []
+
+
+@needs_browser
+def test_a_students_own_page_counts_as_a_student_not_as_an_admin(
+        server: ServerProcess, browser: Any) -> None:
+    """The dashboard counted the student's own page (the robot's token) as an admin."""
+    with dashboard(browser, server) as (page, log):
+        assert card(page, "robot04")["clients"] == "0", "the dashboard is not a student"
+        with client(robot_ws_url(server, "robot04", TOKENS["robot04"])), \
+                client(robot_ws_url(server, "robot04")):
+            wait_for(lambda: card(page, "robot04")["clients"] == "2 (owner)", timeout_s=10.0,
+                     what="robot04's card to count its owner and a watcher")
+        assert log.console_errors == [] and log.page_errors == []
+
+
+@needs_browser
+def test_a_recording_that_stops_is_said_on_its_robots_card(
+        tmp_path: Path, browser: Any) -> None:
+    """A bag at its size limit stopped with a log line only: the dashboard says so too."""
+    server = start_server(["--class", "2", "--record", str(tmp_path / "bags"),
+                           "--record-max-mb", "0.01"])
+    try:
+        with dashboard(browser, server, count=2) as (page, log):
+            wait_in_page(page, """() => [...document.querySelectorAll(
+                    '[data-field=recording]')].every((line) => !line.hidden
+                    && line.textContent.startsWith('recording stopped: it reached its size'))""",
+                         "both cards to say their recording stopped", timeout_s=30.0)
+            assert log.console_errors == [] and log.page_errors == []
+    finally:
+        server.stop()
+    assert "recording of robot01 stopped: it reached its size limit" in "".join(server.output)

@@ -100,7 +100,9 @@ def test_readme_limits_table_states_the_defaults_in_force() -> None:
             f"{limits.address_enrolments}, then {limits.address_enrolments_per_s:g}/s",
         "TF republications (`/republish_tfs` topics and `/tf2_web_republisher` goals, "
         "[docs/viewers.md](docs/viewers.md))":
-            f"{tf.per_client} per client, {tf.per_bridge} per robot; {tf.frames} frames each, "
+            f"{tf.per_client} per client, {tf.per_bridge} per robot, of which clients without "
+            "the robot's token (or the instructor's) hold at most "
+            f"{tf.per_bridge - tf.owner_reserve} together; {tf.frames} frames each, "
             f"a rate above 0 and at most {tf.max_rate_hz:g} Hz, a timeout of at most "
             f"{tf.max_timeout_s:g} s",
     }

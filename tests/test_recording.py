@@ -27,6 +27,8 @@ from robot_rig import RobotRig, robot_rig
 from ros_nodes.bag_writer import CHUNK_SPAN_NS, ROS_DISTRO
 from ros_nodes.recording import Recorder, stamp_ns
 from ros_nodes.robot_interface import QOS_PROFILES, RECORDED_TOPICS, ROBOT_TOPICS
+from rosbridge.core.outbox import Outbox
+from rosbridge.core.session import Session
 from rosbridge.msgs import cdr
 
 TWIST = {"linear": {"x": 0.25, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.5}}
@@ -424,3 +426,57 @@ def test_a_process_that_ends_without_close_still_exits_and_closes_its_bags(
     (bag,) = [path for path in tmp_path.iterdir() if path.is_dir()]
     assert (bag / "metadata.yaml").is_file(), list(bag.iterdir())
     assert len(read_with_rosbags(bag)) >= 20
+
+
+def test_what_a_student_sends_is_bounded_per_minute_and_the_robots_own_topics_go_on(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A student's own /cmd_vel (TwistStamped, a 10 kB frame name, at every tick) grew their
+    robot's bag at 3.2 MB/s until its cap stopped it. Now their messages are bounded per
+    minute of the robot's clock; every message of the robot's own topics is recorded."""
+    per_minute = 200_000
+    recorder = Recorder(tmp_path / "bags", max_queued=100_000,
+                        client_bytes_per_minute=per_minute)
+    rig = robot_rig("empty")
+    recording = recorder.record("alice", rig.robot)
+    recorder.start()
+    client = Session("alice's code", False, Outbox(), clock=rig.clock)  # its budgets on it
+    rig.bridge.connect(client)
+    rig.send(client, {"op": "advertise", "topic": "/cmd_vel",
+                      "type": "geometry_msgs/TwistStamped"})
+    stamped = {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "x" * 10_000},
+               "twist": TWIST}
+    minutes = 2
+    for _ in range(minutes * 60):  # a second of ticks at a time, the writer keeping up
+        for _ in range(20):
+            rig.send(client, {"op": "publish", "topic": "/cmd_vel", "msg": stamped})
+            rig.tick()
+        wait_until(recorder.caught_up, recorder)
+    notice = recording.notice()
+    recorder.close()
+
+    reads = read_with_rosbags(recording.path)
+    counts = Counter(read.topic for read in reads)
+    assert counts["/odom"] == counts["/ground_truth"] == minutes * 60 * 20, "all of its own"
+    commands = [read for read in reads if read.topic == "/cmd_vel"]
+    sent = minutes * 60 * 20
+    assert len(commands) > 0 and recording.stats.clients_left_out == sent - len(commands)
+    added = len(commands) * len(stamped["header"]["frame_id"])
+    assert added <= per_minute * (minutes + 1), "a minute's burst, then the rate"
+    assert added >= per_minute * minutes * 0.8
+    assert notice is not None and "client messages left out (over 0.2 MB a minute)" in notice
+    warnings = [record.getMessage() for record in caplog.records
+                if "its clients' messages add more than" in record.getMessage()]
+    assert len(warnings) <= 1 + minutes, "said once per stretch, not per message"
+    assert warnings and "the robot's own topics go on recording" in warnings[0]
+
+
+def test_a_graded_run_may_set_no_bound_on_its_clients(tmp_path: Path) -> None:
+    recorder = Recorder(tmp_path / "bags", client_bytes_per_minute=None)
+    rig = robot_rig("empty")
+    recording = recorder.record("run", rig.robot)
+    assert recording.client_bytes_per_minute is None
+    recorder.start()
+    drive(rig, 40)
+    recorder.close()
+    assert recording.stats.clients_left_out == 0
+    assert Counter(read.topic for read in read_with_rosbags(recording.path))["/cmd_vel"] == 4

@@ -32,6 +32,8 @@ from websim.replay import Recording, ReplayHost
 
 from server_process import ServerProcess, free_port, stop_process, wait_for
 
+ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
+
 TYPES = {spec.name: spec.type for spec in RECORDED_TOPICS}
 
 
@@ -155,7 +157,7 @@ def test_the_replay_paces_messages_by_their_log_time_times_the_speed(bag: Path) 
 @pytest.mark.parametrize(("args", "reason"), [
     (["{missing}"], "no such recording"),
     (["{not_a_bag}"], "cannot read this recording"),
-    (["{bag}", "--speed", "0"], "--speed must be a number greater than 0"),
+    (["{bag}", "--speed", "0"], "--speed must be a number from 0.05 to 100"),
 ])
 def test_a_recording_that_cannot_be_played_is_refused_with_the_reason(
         tmp_path: Path, bag: Path, args: list[str], reason: str) -> None:
@@ -186,3 +188,116 @@ def test_the_page_shows_the_recorded_robot(bag: Path, browser: Any) -> None:
     finally:
         context.close()
         assert stop_process(server.process, server.output, signal.SIGTERM) == 0
+
+
+def control(host: ReplayHost, session: Session, **args: Any) -> dict[str, Any]:
+    """Call the player's service as a client would, through the bridge; its reply."""
+    host.bridge.handle(session, json.dumps({"op": "call_service", "service": "/websim/replay",
+                                            "id": "c", "args": args}))
+    replies = []
+    while (frame := session.outbox.pop()) is not None:
+        replies.append(json.loads(frame))
+    (reply,) = [r for r in replies if r.get("op") == "service_response"]
+    return dict(reply)
+
+
+def test_the_player_pauses_seeks_and_sets_the_speed_for_every_viewer(bag: Path) -> None:
+    clock = ManualClock()
+    host = ReplayHost(Recording(bag), clock=clock)
+    viewer = Session("viewer", False, Outbox())
+    host.bridge.connect(viewer)
+    host.bridge.handle(viewer, json.dumps({"op": "subscribe", "topic": "/odom"}))
+    for _ in range(10):  # half a second of the recording
+        clock.advance(0.05)
+        host.tick()
+    paused = control(host, viewer, command="pause")["values"]
+    assert paused["playing"] is False and paused["position_s"] == pytest.approx(0.5)
+    before = host.played
+    for _ in range(10):
+        clock.advance(0.05)
+        host.tick()
+    assert host.played == before and host.position_s == pytest.approx(0.5), "paused"
+
+    middle_s = host.recording.duration_s / 2
+    seeked = control(host, viewer, command="seek", position_s=middle_s)["values"]
+    assert seeked["position_s"] == pytest.approx(middle_s)
+    assert control(host, viewer, command="speed", speed=4)["values"]["speed"] == 4
+    while viewer.outbox.pop() is not None:
+        pass
+    played = control(host, viewer, command="play")["values"]
+    assert played["playing"] is True
+    clock.advance(0.05)
+    host.tick()  # 0.2 s of the recording at 4x, from the middle on
+    frames = []
+    while (frame := viewer.outbox.pop()) is not None:
+        frames.append(json.loads(frame))
+    odoms = [f["msg"]["header"]["stamp"] for f in frames if f.get("topic") == "/odom"]
+    start_s = host.recording.start_ns / 1e9
+    times = [stamp["sec"] + stamp["nanosec"] / 1e9 - start_s for stamp in odoms]
+    assert times and all(middle_s - 0.001 <= t <= middle_s + 0.25 for t in times), times
+
+    wrong = [control(host, viewer, command="rewind"),
+             control(host, viewer, command="seek", position_s=-1),
+             control(host, viewer, command="seek", position_s="10"),
+             control(host, viewer, command="speed", speed=1e9)]
+    assert [reply["result"] for reply in wrong] == [False] * 4
+    assert "command must be one of play, pause, seek, speed, status" in wrong[0]["values"]
+    assert "position_s must be a number from 0 to" in wrong[1]["values"]
+    assert "speed must be a number from 0.05 to 100, got 1000000000.0" in wrong[3]["values"]
+
+
+def test_a_seek_first_still_gives_the_walls_and_the_lasers_mount(bag: Path) -> None:
+    """Latched topics recorded at the start: a page that seeks before they were played."""
+    clock = ManualClock()
+    host = ReplayHost(Recording(bag), clock=clock)
+    viewer = Session("viewer", False, Outbox())
+    host.bridge.connect(viewer)
+    for topic in ("/world", "/tf_static"):
+        host.bridge.handle(viewer, json.dumps({"op": "subscribe", "topic": topic}))
+    host.control({"command": "seek", "position_s": host.recording.duration_s / 2}, viewer)
+    topics = []
+    while (frame := viewer.outbox.pop()) is not None:
+        topics.append(json.loads(frame).get("topic"))
+    assert {"/world", "/tf_static"} <= set(topics)
+
+
+@needs_browser
+def test_the_replay_page_is_a_player_without_driving(bag: Path, browser: Any) -> None:
+    """It looked like a live robot (drive pad, PID panel, 'Another client is driving this
+    robot') and the banner printed an admin token that did nothing."""
+    server = start_replay(bag, "--speed", "0.5")
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    try:
+        page, log = open_page(context, f"{server.http_url}/")
+        wait_connected(page)
+        for hidden in ("#drive-pad", "#pid-form", "nav a[href=admin]", "#other-driver"):
+            assert not page.is_visible(hidden), hidden
+        assert page.is_visible("#player") and page.is_visible("#player-seek")
+        page.wait_for_function("document.querySelector('#player-toggle').textContent "
+                               "=== 'Pause'", timeout=10000)
+        page.click("#player-toggle")
+        wait_for(lambda: server.health()["playing"] is False, timeout_s=10,
+                 what="the replay to pause")
+        assert page.text_content("#player-toggle") in ("Play", "Pause")
+        page.wait_for_function("document.querySelector('#player-toggle').textContent "
+                               "=== 'Play'", timeout=5000)
+        page.select_option("#player-speed", "2")
+        wait_for(lambda: server.health()["speed"] == 2, timeout_s=10, what="speed 2")
+        target_s = round(server.health()["duration_s"] * 0.75, 1)
+        page.evaluate("(value) => { const seek = document.querySelector('#player-seek');"
+                      " seek.value = String(value);"
+                      " seek.dispatchEvent(new Event('input'));"
+                      " seek.dispatchEvent(new Event('change')); }", target_s)
+        wait_for(lambda: abs(server.health()["position_s"] - target_s) < 0.11, timeout_s=10,
+                 what="the replay at the position sought")
+        page.wait_for_function("document.querySelector('#player-time').textContent"
+                               ".includes(' / ')", timeout=5000)
+        page.screenshot(path=str(ARTIFACTS / "replay-player.png"))
+        assert not log.page_errors
+        assert not [error for error in log.console_errors if "replay" in error.lower()]
+    finally:
+        context.close()
+        assert stop_process(server.process, server.output, signal.SIGTERM) == 0
+    output = "".join(server.output)
+    assert "token=" not in output, "no admin token that does nothing"
+    assert "player:    the page plays, pauses, seeks and sets the speed" in output

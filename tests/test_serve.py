@@ -265,7 +265,10 @@ def test_sigterm_stops_cleanly_and_banner_shows_urls() -> None:
     assert "websim: stopped" in output and "Traceback" not in output
 
 
-def test_on_every_interface_the_banner_lists_what_students_type_and_a_qr_code() -> None:
+def test_on_every_interface_every_url_names_the_address_students_reach_and_a_qr_code(
+) -> None:
+    """One host everywhere: the machine's address on the network, not 'localhost' for some
+    lines and the host name (which students' machines often cannot resolve) for others."""
     running = start_server(["--host", "0.0.0.0"])
     assert running.stop() == 0
     output = "".join(running.output)
@@ -274,9 +277,14 @@ def test_on_every_interface_the_banner_lists_what_students_type_and_a_qr_code() 
     if not addresses:  # a machine with loopback only
         assert "no network address found besides loopback" in output
         return
-    pages = [f"http://{address}:{running.http_port}/" for address in addresses]
-    assert f"  students:  {'  '.join(pages)}\n" in output
-    code = qr_lines(pages[0])
+    page = f"http://{addresses[0]}:{running.http_port}/"
+    assert f"  page:      {page}\n" in output
+    assert f"  websocket: ws://{addresses[0]}:{running.ws_port}/\n" in output
+    assert f"  admin:     {page}admin?token=" in output
+    urls = [word for word in output.split() if "://" in word]
+    assert urls and all(f"://{addresses[0]}:" in url for url in urls), urls
+    assert socket.gethostname() not in urls[0]
+    code = qr_lines(page)
     assert "\n".join(f"  {line}" for line in code) in output
     assert len(code) >= 12 and len({len(line) for line in code}) == 1  # a square of modules
     assert set("".join(code)) <= set("█▀▄ ")

@@ -15,6 +15,7 @@ import pytest
 from robot_rig import RobotRig, robot_rig
 
 from physics import LidarParams
+from rosbridge.core.outbox import Outbox
 from rosbridge.core.schema import GoalStatus
 from rosbridge.core.session import Session
 from rosbridge.tf.republisher import (
@@ -203,6 +204,33 @@ def test_the_bridge_serves_a_bounded_number_of_republications(rig: RobotRig) -> 
             assert rig.call(page, REPUBLISH_SERVICE, request(["base_link"]))["result"]
     refused = rig.call(rig.client("late"), REPUBLISH_SERVICE, request(["base_link"]))
     assert not refused["result"] and "serves 64 republications already" in refused["values"]
+
+
+def test_watchers_of_a_robot_never_take_its_owners_share(rig: RobotRig) -> None:
+    """Tokenless watchers of a classmate's robot took all 64 republications: its owner's
+    page was refused. Watchers together hold at most what the owner's reserve leaves."""
+    limits = RepublisherLimits()
+    watchers = [Session(f"watcher{n}", False, Outbox(), may_drive=False)
+                for n in range(limits.per_bridge // limits.per_client)]
+    granted = 0
+    for watcher in watchers:
+        rig.bridge.connect(watcher)
+        for _ in range(limits.per_client):
+            reply = rig.call(watcher, REPUBLISH_SERVICE, request(["base_link"]))
+            granted += reply["result"]
+    assert granted == limits.per_bridge - limits.owner_reserve
+    assert "are kept for its owner" in reply["values"]
+    owner = rig.client("owner")  # may drive: its token (a single robot: everyone)
+    for _ in range(limits.per_client):
+        assert rig.call(owner, REPUBLISH_SERVICE, request(["base_link"]))["result"]
+    instructor = rig.client("instructor", admin=True)
+    for _ in range(limits.owner_reserve - limits.per_client):
+        assert rig.call(instructor, REPUBLISH_SERVICE, request(["base_link"]))["result"]
+    assert rig.host.tf_republisher.held() == limits.per_bridge
+    rig.bridge.disconnect(watchers[0])  # a watcher's leaving frees a watcher's slots
+    newcomer = Session("watcher-late", False, Outbox(), may_drive=False)
+    rig.bridge.connect(newcomer)
+    assert rig.call(newcomer, REPUBLISH_SERVICE, request(["base_link"]))["result"]
 
 
 @pytest.mark.parametrize(("changes", "reason"), [

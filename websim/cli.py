@@ -256,8 +256,7 @@ def _run_robot_json(args: argparse.Namespace) -> int:
 
 
 def _run_serve(args: argparse.Namespace) -> int:
-    token = args.admin_token or strong_token()
-    weakness = weak_token(token)
+    weakness = None if args.admin_token is None else weak_token(args.admin_token)
     if weakness is not None:
         raise ConfigError(f"--admin-token is too weak: {weakness} (leave it out for a random "
                           "one, printed at start)")
@@ -270,6 +269,7 @@ def _run_serve(args: argparse.Namespace) -> int:
     clock = make_clock(args.speed)  # the one clock of the server: every robot's, the class's
     recorder = serve_command.recorder_from(args)
     if args.class_spec is None:
+        token = args.admin_token or strong_token()
         robot = VirtualRobot(make_simulation(args), clock, localization=args.localization)
         site = sites.single_robot(robot, token, limits, origins,
                                   args.public_ws_port or args.ws_port, recorder)
@@ -282,9 +282,9 @@ def _run_serve(args: argparse.Namespace) -> int:
                             localization=args.localization)
 
     platform = load_params(args.params)
-    return serve_command.run(args, sites.classroom_site(
-        args, make_robot, (platform.robot, platform.lidar), token, limits, origins, clock,
-        recorder), token)
+    site = sites.classroom_site(args, make_robot, (platform.robot, platform.lidar),
+                                args.admin_token, limits, origins, clock, recorder)
+    return serve_command.run(args, site, site.admin_token)  # given, kept, or new
 
 
 def _run_replay(args: argparse.Namespace) -> int:

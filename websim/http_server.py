@@ -66,7 +66,7 @@ GZIP_LEVEL = 5
 size; once per file and change."""
 
 
-LIVE_DOCUMENTS = ("/robot.json", "/config.json")
+LIVE_DOCUMENTS = ("/robot.json", "/config.json", "/workers.json")
 """Documents the server may fill itself (``LiveDocuments``) instead of serving the file."""
 
 CACHE_CONTROL = "no-cache"
@@ -427,10 +427,14 @@ class HttpServer:
             return web.Response(text=json.dumps(report), content_type="application/json",
                                 headers={"Cache-Control": "no-store"})
         robot: str | None = None
+        if path in ("/", "/index.html") and (landing := self._live.root_notice()) is not None:
+            return notice_page("A class", landing, 200)
+        if path == ROBOTS_PREFIX.rstrip("/"):  # /robots: the name left out
+            path = ROBOTS_PREFIX
         if path.startswith(ROBOTS_PREFIX):  # a class's robot: its page, with its documents
             robot, slash, rest = path[len(ROBOTS_PREFIX):].partition("/")
             if not self._live.has_robot(robot):
-                return not_a_robot_page(self._live.why_no_robot(robot))
+                return not_a_robot_page(self._live.why_no_robot(robot, request.remote or ""))
             if not slash:  # the page's relative URLs need the trailing slash
                 return web.Response(status=308, headers={"Location": f"{ROBOTS_PREFIX}{robot}/"})
             path = f"/{rest}"
@@ -481,25 +485,28 @@ class HttpServer:
         return asset
 
 
-def not_a_robot_page(why: tuple[str, list[str]]) -> web.Response:
-    """404 for a robot page that does not exist, styled as the pages are.
+def not_a_robot_page(reason: str) -> web.Response:
+    """404 for a robot page that does not exist, styled as the pages are: what is wrong.
 
-    It names the robots the address may have meant, each a link to its page.
+    Never the names close to the one asked (classmates'): the instructor's log has them.
     """
-    reason, names = why
-    links = "".join(f'<li><a href="{ROBOTS_PREFIX}{html.escape(name)}/">{html.escape(name)}'
-                    "</a></li>" for name in names)
+    return notice_page("No such robot", reason, 404)
+
+
+def notice_page(title: str, reason: str, status: int) -> web.Response:
+    """A page that says one thing (``reason``) under ``title``, styled as the pages are."""
     body = ('<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
             '<meta name="viewport" content="width=device-width, initial-scale=1">'
-            '<meta name="referrer" content="no-referrer"><title>No such robot - websim</title>'
+            '<meta name="referrer" content="no-referrer">'
+            f'<title>{html.escape(title)} - websim</title>'
             '<link rel="icon" href="/favicon.svg" type="image/svg+xml">'
             '<link rel="stylesheet" href="/css/style.css"></head>'
             '<body><main class="layout"><section class="card not-found">'
-            f'<h1>No such robot</h1><p id="reason">{html.escape(reason, quote=False)}</p>'
-            + (f'<p>Did you mean:</p><ul id="suggestions">{links}</ul>' if names else "")
-            + '<p>Your instructor\'s links name your robot\'s page.</p></section></main>'
-            "</body></html>")
-    return web.Response(status=404, text=body, content_type="text/html")
+            f'<h1>{html.escape(title)}</h1><p id="reason">{html.escape(reason, quote=False)}</p>'
+            '<p>A robot\'s page is <code>/robots/NAME/</code> on this server; your '
+            'instructor\'s links name yours (ask them if yours is not there).</p>'
+            "</section></main></body></html>")
+    return web.Response(status=status, text=body, content_type="text/html")
 
 
 def _etags(header: str) -> list[str]:
@@ -513,8 +520,11 @@ class LiveDocuments(Protocol):
     def has_robot(self, name: str) -> bool:
         """Whether ``/robots/NAME/`` is a robot's page (False on a single-robot server)."""
 
-    def why_no_robot(self, name: str) -> tuple[str, list[str]]:
-        """Why ``/robots/NAME/`` is no robot's page, and the names it may have meant."""
+    def why_no_robot(self, name: str, address: str = "") -> str:
+        """Why ``/robots/NAME/`` is no robot's page, as the student (at ``address``) is told."""
+
+    def root_notice(self) -> str | None:
+        """What ``/`` says instead of a robot's page (a class's root), or None: the page."""
 
     def document(self, robot: str | None, name: str, hostname: str) -> str | None:
         """The text of ``name`` (``robot.json``, ``config.json``) for ``robot``.

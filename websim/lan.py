@@ -15,18 +15,29 @@ import socket
 import psutil
 import segno
 
+VIRTUAL_INTERFACES = ("docker", "br-", "veth", "virbr", "vnet", "podman", "cni", "flannel",
+                      "lxc", "lxd", "vmnet", "vboxnet")
+"""Prefixes of the names of interfaces that lead to containers or virtual machines on this
+machine, not to the classroom: their addresses come last."""
+
 
 def lan_addresses() -> list[str]:
-    """This machine's IPv4 addresses others on its networks can reach, sorted."""
-    found = set()
-    for addresses in psutil.net_if_addrs().values():
+    """This machine's IPv4 addresses others on its networks can reach, likeliest first.
+
+    The first is what the banner and the links name (``sites.public_host``): an address of a
+    real interface before one of a container bridge, a private network's (a classroom's
+    Wi-Fi: 10/8, 172.16/12, 192.168/16) before others, then in order.
+    """
+    found: dict[ipaddress.IPv4Address, bool] = {}
+    for interface, addresses in psutil.net_if_addrs().items():
+        virtual = interface.startswith(VIRTUAL_INTERFACES)
         for address in addresses:
             if address.family != socket.AF_INET:
                 continue
             ip = ipaddress.IPv4Address(address.address)
             if not (ip.is_loopback or ip.is_link_local or ip.is_unspecified):
-                found.add(ip)
-    return [str(ip) for ip in sorted(found)]
+                found[ip] = found.get(ip, True) and virtual
+    return [str(ip) for ip in sorted(found, key=lambda ip: (found[ip], not ip.is_private, ip))]
 
 
 def qr_lines(text: str) -> list[str]:

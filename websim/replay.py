@@ -12,6 +12,12 @@ recorded robot's (``custom_data`` of the bag), else the shipped robot's. The rec
 time runs while a client is connected: it starts when the first page opens and waits while
 nobody watches. At the end the last picture stays; ``--loop`` starts over.
 
+It is a player: the service ``/websim/replay`` (``websim/srv/Replay``: ``{command: play |
+pause | seek | speed | status, position_s, speed}``, answered with the player's status) plays,
+pauses, seeks and sets the speed, for every client at once (what a projector shows: serve it
+on 127.0.0.1, the default, or to a room that may touch it); the page knows a replay by its
+``config.json`` (``replay``) and shows these controls instead of driving.
+
 Messages are read and decoded as they fall due (rosbags' reader and the bridge's typestore),
 never all at once: an hour's bag plays in the memory of a few messages.
 """
@@ -31,21 +37,31 @@ from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
 
 from physics import TICK_PERIOD_S, ConfigError
+from physics.validation import shown
+from ros_nodes.bag_bounds import check_bag
 from ros_nodes.recording import ROBOT_JSON_KEY
 from ros_nodes.robot_description import robot_json
 from ros_nodes.robot_interface import RESERVED_NAMESPACES
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.clock import Clock, WallClock
+from rosbridge.core.errors import ServiceError
 from rosbridge.core.faults import Faults
 from rosbridge.core.limits import OriginPolicy
+from rosbridge.core.session import Session
 from rosbridge.msgs import cdr, definitions
 from rosbridge.msgs.checks import MessageError
 from rosbridge.msgs.values import Message
 from rosbridge.transport.front import Destination, WebSocketFront
 from rosbridge.transport.schedule import Schedule
-from websim.sites import Site
+from websim.sites import REPLAY_SERVICE, REPLAY_SERVICE_TYPE, Site
 
 log = logging.getLogger("websim.replay")
+
+REPLAY_COMMANDS = ("play", "pause", "seek", "speed", "status")
+"""What the player's service does."""
+
+MIN_REPLAY_SPEED, MAX_REPLAY_SPEED = 0.05, 100.0
+"""The speeds a replay plays at (times as recorded)."""
 
 @dataclass(frozen=True)
 class Played:
@@ -76,7 +92,8 @@ class Recording:
         path: the bag's folder (``metadata.yaml`` and its files) or an ``.mcap`` file.
 
     Raises:
-        ConfigError: no such bag, or one that cannot be read (the reason says why).
+        ConfigError: no such bag, one that cannot be read, or one beyond the bounds of
+            ``ros_nodes.bag_bounds`` (its chunks, its YAML): the reason says why.
     """
 
     def __init__(self, path: Path) -> None:
@@ -86,6 +103,7 @@ class Recording:
             raise ConfigError(f"{path}: no such recording (a --record bag's folder or its "
                               ".mcap file)")
         self.path = path
+        check_bag(path)  # nothing in it can make the reader exhaust memory
         try:
             self._reader = Reader(path)
             self._reader.open()
@@ -115,13 +133,31 @@ class Recording:
         """The recorded robot's ``robot.json`` (the shipped robot's if the bag lacks it)."""
         self.name = custom.get("robot") or path.stem
 
-    def messages(self) -> Iterator[Played]:
-        """Every message in log-time order, decoded as it is reached.
+    def messages(self, start_ns: int | None = None) -> Iterator[Played]:
+        """Every message in log-time order (from ``start_ns`` on), decoded as it is reached.
 
         One that does not decode (a corrupt record) is skipped with a warning.
         """
+        yield from self._decoded(self.connections, start_ns, None)
+
+    def latched_before(self, stop_ns: int) -> list[Played]:
+        """The last message of each latched topic recorded before ``stop_ns``.
+
+        What a page that seeks there must hold (``/world``, ``/tf_static``, ``/map``).
+        """
+        latched = [c for c in self.connections if c.topic in self.latched]
+        if not latched:
+            return []
+        last: dict[str, Played] = {}
+        for played in self._decoded(latched, None, stop_ns):
+            last[played.topic] = played
+        return list(last.values())
+
+    def _decoded(self, connections: list[Any], start_ns: int | None,
+                 stop_ns: int | None) -> Iterator[Played]:
         store = cdr.typestore()
-        for connection, log_time_ns, raw in self._reader.messages(self.connections):
+        for connection, log_time_ns, raw in self._reader.messages(connections, start=start_ns,
+                                                                  stop=stop_ns):
             try:
                 msg = definitions.canonical(
                     connection.msgtype,
@@ -149,8 +185,9 @@ class ReplayHost:
 
     def __init__(self, recording: Recording, speed: float = 1.0, loop: bool = False,
                  clock: Clock | None = None) -> None:
-        if not (math.isfinite(speed) and speed > 0):
-            raise ConfigError(f"--speed must be a number greater than 0, got {speed}")
+        if not (math.isfinite(speed) and MIN_REPLAY_SPEED <= speed <= MAX_REPLAY_SPEED):
+            raise ConfigError(f"--speed must be a number from {MIN_REPLAY_SPEED:g} to "
+                              f"{MAX_REPLAY_SPEED:g}, got {speed}")
         self.recording = recording
         self.speed = speed
         self.loop = loop
@@ -160,6 +197,9 @@ class ReplayHost:
                              reserved_namespaces=RESERVED_NAMESPACES)
         for topic, type_name in recording.topics.items():
             self.bridge.topics.own(topic, type_name)  # a recording is not driven
+        self.bridge.services.add(REPLAY_SERVICE, REPLAY_SERVICE_TYPE, self.control)
+        self.playing = True
+        """Whether the recording's time runs (while a client is connected)."""
         self.schedule = Schedule(TICK_PERIOD_S, clock=self.clock)
         self.played = 0
         """Messages published so far (this pass)."""
@@ -178,6 +218,63 @@ class ReplayHost:
         self._position_s = 0.0
         self._at_end = False
         self.played = 0
+
+    def seek(self, position_s: float) -> None:
+        """Go to ``position_s`` (s from the recording's start, within it).
+
+        The latched topics' messages recorded before it are published again first (a page
+        that seeks before they were played still gets the walls and the laser's mount).
+        """
+        position_s = min(max(0.0, position_s), self.recording.duration_s)
+        start_ns = self.recording.start_ns + round(position_s * 1e9)
+        writers = self.schedule.writers
+        for played in self.recording.latched_before(start_ns):
+            writers.write(self.bridge.publish(played.topic, played.msg, latch=True))
+        self._messages = self.recording.messages(start_ns)
+        self._next = next(self._messages, None)
+        self._position_s = position_s
+        self._at_end = False
+
+    def control(self, args: Any, session: Session) -> dict[str, Any]:
+        """``/websim/replay``: play, pause, seek, set the speed, or say the status.
+
+        Raises:
+            ServiceError: an unknown command or a value out of its range (the reason says).
+        """
+        args = args if isinstance(args, dict) else {}
+        command = args.get("command", "status")
+        if command not in REPLAY_COMMANDS:
+            raise ServiceError(f"{REPLAY_SERVICE}: command must be one of "
+                               f"{', '.join(REPLAY_COMMANDS)}, got {shown(command)}")
+        if command == "play":
+            if self.finished:
+                self._restart()
+            self.playing = True
+        elif command == "pause":
+            self.playing = False
+        elif command == "seek":
+            position_s = args.get("position_s")
+            if isinstance(position_s, bool) or not isinstance(position_s, (int, float)) or \
+                    not 0.0 <= position_s <= self.recording.duration_s:
+                raise ServiceError(f"{REPLAY_SERVICE}: position_s must be a number from 0 to "
+                                   f"{self.recording.duration_s:g} (s), got {shown(position_s)}")
+            self.seek(float(position_s))
+        elif command == "speed":
+            speed = args.get("speed")
+            if isinstance(speed, bool) or not isinstance(speed, (int, float)) or \
+                    not MIN_REPLAY_SPEED <= speed <= MAX_REPLAY_SPEED:
+                raise ServiceError(f"{REPLAY_SERVICE}: speed must be a number from "
+                                   f"{MIN_REPLAY_SPEED:g} to {MAX_REPLAY_SPEED:g}, got "
+                                   f"{shown(speed)}")
+            self.speed = float(speed)
+        return self.status()
+
+    def status(self) -> dict[str, Any]:
+        """The player's state: playing, position and duration (s), speed, at its end, loop."""
+        return {"playing": self.playing and not self.finished,
+                "position_s": round(self.position_s, 3),
+                "duration_s": round(self.recording.duration_s, 3), "speed": self.speed,
+                "finished": self.finished, "loop": self.loop}
 
     @property
     def position_s(self) -> float:
@@ -201,7 +298,9 @@ class ReplayHost:
         """
         now_s = self.clock.monotonic_s()
         elapsed_s, self._last_tick_s = now_s - self._last_tick_s, now_s
-        if not self.bridge.sessions:
+        if not self.bridge.sessions or not self.playing:
+            self.bridge.services.expire()
+            self.schedule.writers.write(self.bridge.take_flush())
             return
         self._position_s += elapsed_s * self.speed
         due_ns = self.recording.start_ns + self._position_s * 1e9
@@ -239,6 +338,7 @@ class ReplayHost:
             "position_s": round(self.position_s, 3),
             "duration_s": round(self.recording.duration_s, 3),
             "speed": self.speed,
+            "playing": self.playing,
             "finished": self.finished,
             "passes": self.passes,
             "ticks": self.schedule.ticks_due(),
@@ -279,13 +379,15 @@ def replay_site(recording: Recording, speed: float, loop: bool, token: str,
                 origins: OriginPolicy, ws_port: int) -> Site:
     """What ``websim serve``'s loop runs for a replay: its front, page documents, banner."""
     host = ReplayHost(recording, speed, loop)
-    site = Site(ReplayServer(host, token, origins), ws_port=ws_port,
+    site = Site(ReplayServer(host, token, origins), ws_port=ws_port, replay=host,
                 headline=f"replaying {recording.path} ({recording.duration_s:.1f} s, "
                          f"{recording.message_count} messages) at {speed:g}x"
                          + (", in a loop" if loop else ""),
                 description=recording.robot_json)
-    site.banner.append(f"topics:    {', '.join(sorted(recording.topics))} (the page's "
-                       "teleop and services are refused: a recording is not driven)")
+    site.banner.append(f"topics:    {', '.join(sorted(recording.topics))} (a recording is "
+                       "not driven: publishing on them is refused)")
+    site.banner.append("player:    the page plays, pauses, seeks and sets the speed (for every "
+                       f"viewer at once: {REPLAY_SERVICE})")
     return site
 
 
@@ -294,7 +396,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recording", type=Path, metavar="FILE.mcap|DIR",
                         help="a bag of websim serve --record (its folder or its .mcap file)")
     parser.add_argument("--speed", type=float, default=1.0, metavar="X",
-                        help="play X times faster than recorded (default 1)")
+                        help="play X times faster than recorded, from "
+                             f"{MIN_REPLAY_SPEED:g} to {MAX_REPLAY_SPEED:g} (default 1; the "
+                             "page's player changes it)")
     parser.add_argument("--loop", action="store_true", help="start over at the end")
     parser.add_argument("--host", default="127.0.0.1",
                         help="address to bind (default 127.0.0.1)")

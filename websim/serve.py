@@ -25,10 +25,11 @@ from typing import Protocol
 from classroom.class_server import ClassServer
 from classroom.nginx_config import parse_worker, worker_for, worker_ring
 from classroom.registry import DEFAULT_IDLE_PAUSE_S, DEFAULT_MAX_ROBOTS
+from classroom.state import DEFAULT_ENROLMENT_HOURS
 from physics import TICK_PERIOD_S, ConfigError
 from physics.shipped import shipped
 from physics.world import LOCALIZATIONS
-from ros_nodes.recording import DEFAULT_MAX_MB, Recorder
+from ros_nodes.recording import DEFAULT_CLIENT_MB_PER_MIN, DEFAULT_MAX_MB, Recorder
 from ros_nodes.robot_interface import NODE_NAME
 from ros_nodes.robot_server import SimServer
 from rosbridge.core.clock import SPEED_MAX
@@ -38,7 +39,7 @@ from rosbridge.graph.names import RELAY_NODE_NAME
 from rosbridge.transport.front import start_websocket
 from websim.http_server import start_http
 from websim.lan import lan_addresses, qr_lines
-from websim.sites import Site, dashboard_url
+from websim.sites import Site, dashboard_url, public_host, url_name
 
 WEB_DIR = shipped("websim", "web-interface")
 """The static frontend."""
@@ -61,7 +62,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="secret for admin rights (the instructor's, in a class): at least "
                              "20 characters of A-Z a-z 0-9 . _ ~ -, mixing three of lower "
                              "case, upper case, digits and symbols; a weaker one is refused "
-                             "(default: a random one, printed at start)")
+                             "(websim token prints one). Default: a class keeps the one of "
+                             "its state file (made at its first start); one robot, a random "
+                             "one at each start; printed at start")
     defaults = ClientLimits()
     parser.add_argument("--max-rate", type=_positive(float), default=defaults.max_rate,
                         metavar="N",
@@ -74,8 +77,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              f"connection (1009; default {defaults.max_frame_bytes})")
     parser.add_argument("--max-queued-bytes", type=_positive(int),
                         default=defaults.max_queued_bytes, metavar="BYTES",
-                        help="most bytes waiting to be sent to one client; a client that lets "
-                             "more pile up is not reading and is closed (1008; default "
+                        help="most bytes waiting to be sent to one client: beyond it its "
+                             "oldest topic messages are dropped for the newest; replies beyond "
+                             "it close it (1008; default "
                              f"{defaults.max_queued_bytes})")
     parser.add_argument("--max-clients", type=_positive(int), default=defaults.max_clients,
                         metavar="N",
@@ -123,13 +127,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default: only with the robot's token or the instructor's; "
                              "without one a connection may only watch)")
     parser.add_argument("--state", default=None, metavar="FILE",
-                        help="with --class: the SQLite file keeping the class's secret, "
-                             "enrolments and each robot's parameters, pause and pose across "
-                             "restarts (default: ROSTER.websim-state.sqlite beside the roster; "
-                             "for --class N or a worker, in ~/.local/share/websim/)")
+                        help="with --class: the SQLite file keeping the class's secret, the "
+                             "instructor's token, enrolments and each robot's parameters, "
+                             "pause and pose across restarts (default: "
+                             "ROSTER.websim-state.sqlite beside the roster; for --class N, "
+                             "one per folder and port in ~/.local/share/websim/, started "
+                             "anew when last saved more than 12 h ago; the banner says what "
+                             "was restored and from where)")
     parser.add_argument("--fresh", action="store_true",
                         help="with --class: start the class over: new secret (new robot "
-                             "tokens), no enrolments, every robot at its spawn pose")
+                             "tokens), new instructor's token (unless --admin-token), no "
+                             "enrolments, every robot at its spawn pose")
+    parser.add_argument("--enrolment-hours", type=_positive(float),
+                        default=DEFAULT_ENROLMENT_HOURS, metavar="H",
+                        help="with --open-class: a name nobody connected to for H hours is "
+                             "forgotten at the next start, with its robot (default "
+                             f"{DEFAULT_ENROLMENT_HOURS:g})")
     parser.add_argument("--max-robots", type=_positive(int), default=DEFAULT_MAX_ROBOTS,
                         metavar="N", help="most robots an open class holds (default "
                                           f"{DEFAULT_MAX_ROBOTS})")
@@ -138,8 +151,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                           "for S seconds stops ticking, keeping its state "
                                           f"(default {DEFAULT_IDLE_PAUSE_S:g})")
     parser.add_argument("--links", default=None, metavar="FILE",
-                        help="with --class: write a CSV of every robot's page, admin page "
-                             "with its token, WebSocket URL and token, to hand out")
+                        help="with --class: write FILE, a CSV to hand out (every robot's "
+                             "page, admin page with its token, WebSocket URL and token; never "
+                             "the instructor's token), and beside it FILE's name with "
+                             ".instructor.txt, yours (the dashboard and the instructor's "
+                             "token); both mode 0600")
     parser.add_argument("--worker", action="store_true",
                         help="with --class: one of several processes behind nginx (websim "
                              "nginx-config): a robot is made when first routed here")
@@ -162,8 +178,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "real robot (default: the world's 'localization', else none)")
     parser.add_argument("--public-host", type=_host_name, default=None, metavar="HOST",
                         help="the host name or address students reach (this machine's on "
-                             "the network, or a proxy's), for the links file (default: this "
-                             "machine's name with --host 0.0.0.0, else --host)")
+                             "the network, or a proxy's), in every URL the banner and the "
+                             "links files give (default: with --host 0.0.0.0, this machine's "
+                             "address on the network; else --host)")
     parser.add_argument("--record", type=Path, default=None, metavar="DIR",
                         help="record every robot to a rosbag2 of its own (MCAP storage: ros2 "
                              "bag, Foxglove and Lichtblick open it) in DIR/NAME_<UTC time>/ "
@@ -172,6 +189,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="MB",
                         help="with --record: a robot's bag reaching this size on disk is "
                              f"closed and recording it stops (default {DEFAULT_MAX_MB:g})")
+    parser.add_argument("--record-client-mb-per-min", type=_positive(float),
+                        default=DEFAULT_CLIENT_MB_PER_MIN, metavar="MB",
+                        help="with --record: what a robot's clients (their /cmd_vel) may add "
+                             "to its bag per minute; beyond it their messages are left out, "
+                             "said in the log and on the dashboard, and the robot's own "
+                             f"topics go on recording (default {DEFAULT_CLIENT_MB_PER_MIN:g})")
     parser.add_argument("--ros", action="store_true",
                         help="also run the virtual_robot node on the ROS 2 graph and relay "
                              "rosbridge topics to it (needs rclpy: pip install '.[ros]')")
@@ -211,10 +234,6 @@ def _host_name(text: str) -> str:
         if HOST_NAME.fullmatch(text):
             return text
     raise argparse.ArgumentTypeError(f"expected a host name or an IP address, got '{text}'")
-
-
-def _url_host(host: str) -> str:
-    return "localhost" if host in ("0.0.0.0", "::", "127.0.0.1", "") else host
 
 
 def limits_from(args: argparse.Namespace) -> ClientLimits:
@@ -309,8 +328,10 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     if ros is not None:
         tasks.append(asyncio.create_task(_poll_graph(ros)))
 
-    host = _url_host(args.host)
-    # what students and the instructor type: behind a proxy, its ports (--public-*-port)
+    # what students and the instructor type, one host everywhere (the address students
+    # reach: --public-host, else this machine's on the network); behind a proxy, its ports
+    public = public_host(args)
+    host = url_name(public)
     http_port = args.public_http_port or args.http_port
     ws_port = args.public_ws_port or args.ws_port
     single = site.classroom is None
@@ -318,14 +339,15 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
         print(f"websim: {site.headline}", flush=True)
         print(f"  page:      http://{host}:{http_port}/", flush=True)
         print(f"  websocket: ws://{host}:{ws_port}/", flush=True)
-        print(f"  admin:     http://{host}:{http_port}/admin?token={token}", flush=True)
+        if site.replay is None:
+            print(f"  admin:     http://{host}:{http_port}/admin?token={token}", flush=True)
     else:
         print(f"websim: a class, {args.mode} mode", flush=True)
         print(f"  pages:     http://{host}:{http_port}/robots/NAME/", flush=True)
         print(f"  websocket: ws://{host}:{ws_port}/robots/NAME", flush=True)
         print(f"  admin:     http://{host}:{http_port}/robots/NAME/admin?token={token} "
               "(the instructor's token: every robot)", flush=True)
-        print(f"  dashboard: {dashboard_url(host, http_port, token)}", flush=True)
+        print(f"  dashboard: {dashboard_url(public, http_port, token)}", flush=True)
         if args.public_http_port or args.public_ws_port:
             print(f"  (this process listens on {args.http_port} and {args.ws_port}; the "
                   "addresses above are the proxy's)", flush=True)
@@ -359,7 +381,7 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
                   + ("the links file" if getattr(args, "links", None) else
                      "--links FILE writes every robot's; the dashboard's Token button shows "
                      "one") + ")", flush=True)
-        _print_lan_urls(args, single)
+        _print_lan_urls(args, single, public, http_port)
     if not (args.web_dir / "node_modules" / "roslib").is_dir():
         print(f"websim: warning: the page's libraries are not installed in {args.web_dir}; "
               "run: npm ci --prefix web-interface", flush=True)
@@ -383,20 +405,28 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     return 0
 
 
-def _print_lan_urls(args: argparse.Namespace, single_robot: bool) -> None:
-    """What students on this machine's networks type (and, for one robot, a QR code of it)."""
+def _print_lan_urls(args: argparse.Namespace, single_robot: bool, host: str,
+                    http_port: int) -> None:
+    """Where students are sent (and, for one robot, a QR code of its page).
+
+    Every URL above names one host; this says which other addresses the machine has, if
+    any, so an instructor whose students are on another network can name that one
+    (``--public-host``).
+    """
     addresses = lan_addresses()
-    if not addresses:
+    if not addresses and not getattr(args, "public_host", None):
         print("  no network address found besides loopback: students on other machines "
               "cannot reach this one", flush=True)
         return
-    http_port = args.public_http_port or args.http_port
-    path = "/" if single_robot else "/robots/NAME/"
-    pages = [f"http://{address}:{http_port}{path}" for address in addresses]
-    print(f"  students:  {'  '.join(pages)}", flush=True)
+    others = [address for address in addresses if address != host]
+    host = url_name(host)
+    if others:
+        print(f"  also at:   {', '.join(others)} (this machine's other addresses; "
+              "--public-host ADDRESS names the one students reach in every URL)", flush=True)
     if single_robot:
-        print(f"  {pages[0]} as a QR code:", flush=True)
-        for line in qr_lines(pages[0]):
+        page = f"http://{host}:{http_port}/"
+        print(f"  {page} as a QR code:", flush=True)
+        for line in qr_lines(page):
             print(f"  {line}", flush=True)
 
 
@@ -541,7 +571,9 @@ def recorder_from(args: argparse.Namespace) -> Recorder | None:
                           f"{error.strerror}") from None
     if not directory.is_dir() or not os.access(directory, os.W_OK | os.X_OK):
         raise ConfigError(f"--record {directory}: not a folder this user can write")
-    return Recorder(directory, max_bytes=int(args.record_max_mb * 1e6))
+    return Recorder(directory, max_bytes=int(args.record_max_mb * 1e6),
+                    client_bytes_per_minute=int(getattr(args, "record_client_mb_per_min",
+                                                        DEFAULT_CLIENT_MB_PER_MIN) * 1e6))
 
 
 def run(args: argparse.Namespace, site: Site, token: str) -> int:

@@ -12,20 +12,28 @@ import csv
 import io
 import json
 import os
-import socket
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from classroom.class_server import ClassServer, closest_names
+from classroom.class_server import ClassServer
 from classroom.registry import (
     Classroom,
     Student,
     numbered_roster,
     read_roster,
+    strong_token,
 )
-from classroom.state import ClassState, class_identity, default_state_path
+from classroom.state import (
+    DEFAULT_ENROLMENT_HOURS,
+    SAVE_INTERVAL_S,
+    STALE_AFTER_S,
+    ClassState,
+    class_identity,
+    default_state_path,
+)
 from physics import ConfigError, LidarParams, RobotParams
 from ros_nodes.recording import SINGLE_ROBOT_NAME, Recorder
 from ros_nodes.robot_description import robot_json
@@ -39,6 +47,14 @@ from rosbridge.core.clock import Clock
 from rosbridge.core.limits import ClientLimits, LatchedBytes, OriginPolicy
 from rosbridge.transport.front import WebSocketFront
 from rosbridge.transport.schedule import Schedule
+from websim.lan import lan_addresses
+
+REPLAY_SERVICE = "/websim/replay"
+"""A replay's player controls (``websim.replay.ReplayHost.control``), named to its page in
+``config.json``."""
+
+REPLAY_SERVICE_TYPE = "websim/srv/Replay"
+"""Its type, as the page names it."""
 
 
 @dataclass
@@ -63,6 +79,9 @@ class Site:
             which ``--ros`` also offers on the graph; None for a class.
         ros_parameters: overrides of the single robot's node parameters with ``--ros``
             (``websim grade``: a reliable ``/scan``).
+        admin_token: the instructor's token (a class's: given, or kept in its state file);
+            empty: the caller's.
+        replay: a replay's player (``websim.replay.ReplayHost``), else None.
     """
 
     front: WebSocketFront
@@ -77,6 +96,8 @@ class Site:
     ros: Any = None
     simulation: SimulationServices | None = None
     ros_parameters: dict[str, Any] = field(default_factory=dict)
+    admin_token: str = ""
+    replay: Any = None
 
     def close(self) -> None:
         """Close the recordings, save a class's state and release its file (at shutdown)."""
@@ -102,14 +123,32 @@ class Site:
         """Whether ``/robots/NAME/`` is a robot's page (pages create no robot)."""
         return self.classroom is not None and self.classroom.knows(name)
 
-    def why_no_robot(self, name: str) -> tuple[str, list[str]]:
-        """Why ``/robots/NAME/`` is no robot's page, and the names it may have meant."""
+    def why_no_robot(self, name: str, address: str = "") -> str:
+        """Why ``/robots/NAME/`` is no robot's page, as the student is told.
+
+        The names close to theirs (classmates') go to the instructor's log only, once per
+        address a while (the front's refusal log).
+        """
         if self.classroom is None:
-            return "this server runs one robot, not a class: its page is /", []
-        known = list(self.classroom.students) + [hosted for hosted, _ in self.classroom]
-        reason = self.front.why_unknown(name) if isinstance(self.front, ClassServer) else \
-            f"no robot named '{name[:40]}' here"
-        return reason, closest_names(name, known)
+            return "this server runs one robot, not a class: its page is /"
+        if not isinstance(self.front, ClassServer):
+            return f"no robot named '{name[:40]}' here"
+        reason = self.front.why_unknown(name)
+        self.front.refusals.note(address, "no such robot page", f"refused the page of "
+                                 f"{ROBOTS_PREFIX}{name[:40]}/: {reason}"
+                                 + self.front.log_hint(f"{ROBOTS_PREFIX}{name}"))
+        return reason
+
+    def root_notice(self) -> str | None:
+        """What ``/`` of a class says instead of a robot's page; None for one robot.
+
+        No robot is there: a student who left out ``/robots/NAME`` got a robot page that
+        could never connect.
+        """
+        if self.classroom is None:
+            return None
+        return ("This server hosts a class: each student's robot has its own page, at "
+                f"{ROBOTS_PREFIX}NAME/ (the instructor's dashboard is /class).")
 
     def document(self, robot: str | None, name: str, hostname: str) -> str | None:
         """The live ``robot.json`` of a robot, and a class robot's ``config.json``.
@@ -117,19 +156,28 @@ class Site:
         A class robot not hosted here (yet) is described as a new robot would be: behind a
         proxy the page and the WebSocket of one robot may be served by different workers.
         """
+        if name == "workers.json" and (robot is not None or self.classroom is None):
+            return None  # a class's root only
         if robot is None:
             if self.classroom is None:  # one robot: its description, and where its bridge is
                 if name == "robot.json":
                     if self.robot is None:
                         return self.description
                     return robot_json(self.robot.sim.params, self.robot.sim.lidar.params)
-                url = f"ws://{_url_name(hostname)}:{self.ws_port}/"
-                return json.dumps({"about": "this server's robot, filled by websim serve: "
-                                            "the bridge of the server that served the page",
-                                   "ws": url, "adminWs": url})
+                url = f"ws://{url_name(hostname)}:{self.ws_port}/"
+                single: dict[str, object] = {
+                    "about": "this server's robot, filled by websim serve: the bridge of the "
+                             "server that served the page", "ws": url, "adminWs": url}
+                if self.replay is not None:  # the page is a player: no driving
+                    single["replay"] = {"name": REPLAY_SERVICE, "type": REPLAY_SERVICE_TYPE}
+                return json.dumps(single)
             if name == "robot.json":  # a class's root (the dashboard): a class robot's
                 return self.new_robot_json
-            url = f"ws://{_url_name(hostname)}:{self.ws_port}/"
+            if name == "workers.json":  # one process (behind nginx, nginx answers it)
+                return json.dumps({"about": "this class is served by one websim serve "
+                                            "process: its root view is at the WebSocket "
+                                            "root", "workers": None})
+            url = f"ws://{url_name(hostname)}:{self.ws_port}/"
             return json.dumps({"about": "the instructor's view of this class, filled by "
                                         "websim serve; robotsPath: where its robots' pages are",
                                "ws": url, "adminWs": url, "robotsPath": ROBOTS_PREFIX})
@@ -138,7 +186,7 @@ class Site:
             if host is None:
                 return self.new_robot_json
             return robot_json(host.robot.sim.params, host.robot.sim.lidar.params)
-        url = f"ws://{_url_name(hostname)}:{self.ws_port}{ROBOTS_PREFIX}{robot}"
+        url = f"ws://{url_name(hostname)}:{self.ws_port}{ROBOTS_PREFIX}{robot}"
         config: dict[str, object] = {"about": f"robot {robot} of this class, filled by websim "
                                               "serve", "ws": url, "adminWs": url,
                                      "robot": robot}
@@ -186,19 +234,21 @@ def class_roster(spec: str) -> list[Student]:
 
 
 def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], VirtualRobot],
-                   new_robot_params: tuple[RobotParams, LidarParams], token: str,
+                   new_robot_params: tuple[RobotParams, LidarParams], token: str | None,
                    limits: ClientLimits, origins: OriginPolicy,
                    clock: Clock | None = None, recorder: Recorder | None = None) -> Site:
     """A class: robot NAME at ``ws://HOST:9090/robots/NAME``, its page at ``/robots/NAME/``.
 
-    Writes the links file when ``--links`` asks for one.
+    Writes the links files when ``--links`` asks for them.
 
     Args:
         args: the options of ``websim serve``.
         make_robot: builds a student's robot (with ``clock``).
         new_robot_params: the robot and LiDAR a new robot gets (its ``robot.json``).
-        token: the instructor's token (robots' tokens derive from the class's own secret,
-            kept in its state file: ``--state``, ``--fresh``).
+        token: the instructor's token (``--admin-token``); None: the one kept in the class's
+            state file, else a new one, kept there (``Site.admin_token`` says which). Robots'
+            tokens derive from the class's own secret, kept there too (``--state``,
+            ``--fresh``).
         limits: the bounds every client lives within.
         origins: which web pages may connect.
         clock: the server's one clock, the robots' too. Default: wall time.
@@ -208,16 +258,22 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
         ConfigError: a bad roster or world (the message names the file and line).
     """
     roster = class_roster(args.class_spec)
-    state_path = Path(args.state) if getattr(args, "state", None) else default_state_path(
-        args.class_spec, args.ws_port if args.worker else None)
+    named = getattr(args, "state", None)
+    state_path = Path(named) if named else default_state_path(
+        args.class_spec, args.ws_port if args.worker else None, ws_port=args.ws_port)
+    anonymous = not named and args.class_spec.isdigit()  # nothing else tells two apart
     state = ClassState(state_path, class_identity(args.class_spec),
-                       fresh=getattr(args, "fresh", False))
+                       fresh=getattr(args, "fresh", False),
+                       stale_after_s=STALE_AFTER_S if anonymous else None)
     try:
+        token, token_kept = state.admin_token(token, strong_token)
         classroom = Classroom(roster, make_robot, open_class=args.open_class,
                               max_robots=args.max_robots, idle_pause_s=args.idle_pause,
                               lazy=args.worker, clock=clock, state=state,
                               latched=LatchedBytes.for_server(limits),
-                              recorder=recorder, on_robot=simulated)
+                              recorder=recorder, on_robot=simulated,
+                              enrolment_hours=getattr(args, "enrolment_hours",
+                                                      DEFAULT_ENROLMENT_HOURS))
     except BaseException:
         state.close()
         raise
@@ -225,7 +281,8 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
     site = Site(ClassServer(classroom, token, limits=limits, origins=origins,
                             open_drive=open_drive),
                 ws_port=args.public_ws_port or args.ws_port, classroom=classroom,
-                new_robot_json=robot_json(*new_robot_params), recorder=recorder)
+                new_robot_json=robot_json(*new_robot_params), recorder=recorder,
+                admin_token=token)
     names = list(classroom.students)
     notes = [note for note, wanted in (("new names enrol (open class)", args.open_class),
                                        ("a worker: a robot is made when first routed here",
@@ -235,20 +292,20 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
     first, last = (names[0], names[-1]) if names else ("none yet", "none yet")
     site.banner.append(f"class:     {len(names)} robots ({first} ... {last}), each at "
                        f"{ROBOTS_PREFIX}NAME/ on both ports" + "".join(f"; {n}" for n in notes))
-    site.banner.append(f"state:     {state.path} ("
-                       + ("restored: robots as they were, same tokens" if state.restored
-                          else "new: saved every few seconds; --fresh starts over") + ")")
+    site.banner.extend(state_lines(state, classroom, token_kept, anonymous))
     if recorder is not None:
         site.banner.append(f"recording: {recorder.directory}/NAME_<UTC time>/ per robot "
                            "(rosbag2, MCAP storage)")
     if args.links is not None:
-        host = getattr(args, "public_host", None) or public_host(args.host)
-        write_links(Path(args.links), classroom, host,
-                    args.public_http_port or args.http_port, site.ws_port, token)
-        site.banner.append(f"links:     {args.links} (name, page, admin page with the robot's "
-                           "token, WebSocket, token; last, #instructor: the dashboard), at "
-                           f"{_url_name(host)} (--public-host: the name or address students "
-                           "reach)")
+        host = public_host(args)
+        handout, private = Path(args.links), instructor_links_path(Path(args.links))
+        http_port = args.public_http_port or args.http_port
+        write_links(handout, classroom, host, http_port, site.ws_port)
+        write_instructor_links(private, host, http_port, site.ws_port, token)
+        site.banner.append(f"links:     {handout} to hand out (each robot's page, WebSocket "
+                           "and token; no instructor token)")
+        site.banner.append(f"           {private} is yours (the dashboard and the "
+                           "instructor's token): keep it to yourself")
     return site
 
 
@@ -260,11 +317,61 @@ def simulated(name: str, host: RobotHost) -> None:
     add_simulation_services(host.bridge, OneRobotWorld(host, name))
 
 
-def public_host(bind: str) -> str:
-    """The host name students use: the machine's name when bound to every interface."""
+def state_lines(state: ClassState, classroom: Classroom, token_kept: bool,
+                anonymous: bool) -> list[str]:
+    """What the banner says of the class's state file: where, and what came back from it."""
+    where = f"state:     {state.path}"
+    if state.stale_s is not None:
+        hours = state.stale_s / 3600.0
+        lines = [f"{where}: last saved {hours:.0f} h ago, more than {STALE_AFTER_S / 3600:g} "
+                 "h: started anew (another day's class; --state FILE restores a file "
+                 "however old)"]
+    elif state.saved_s is None:
+        lines = [f"{where}: new (saved every {SAVE_INTERVAL_S:g} s; a restart restores it, "
+                 "--fresh starts anew)"]
+    else:
+        ago_s = max(0.0, time.time() - state.saved_s)
+        ago = f"{ago_s / 60:.0f} min" if ago_s < 5400 else f"{ago_s / 3600:.1f} h"
+        restored = [f"{len(classroom)} robots as they were" if state.restored else
+                    "no robot's state", "the same tokens"]
+        if token_kept:
+            restored.append("the instructor's token")
+        if classroom.open_class:
+            restored.append(f"{len(state.enrolments())} enrolments")
+        lines = [f"{where}: restored, saved {ago} ago: {', '.join(restored)} "
+                 "(--fresh starts anew)"]
+        if anonymous:  # nothing tells two sections of --class N apart but this line
+            lines.append("           the links of the class run from here then drive these "
+                         "robots: another class or section? --fresh (new links), or its own "
+                         "--state FILE")
+    if classroom.forgotten:
+        shown_names = ", ".join(classroom.forgotten[:5])
+        more = f" and {len(classroom.forgotten) - 5} more" if len(classroom.forgotten) > 5 \
+            else ""
+        lines.append(f"           forgot {len(classroom.forgotten)} enrolments nobody used for "
+                     f"the enrolment time ({shown_names}{more})")
+    if anonymous and state.saved_s is None:
+        lines.append("           (--class N keeps its state per folder and port; "
+                     "--state FILE names one)")
+    return lines
+
+
+def public_host(args: argparse.Namespace) -> str:
+    """The one host name or address every URL the server prints and writes names.
+
+    ``--public-host``; else, bound to every interface, this machine's address on the
+    network (``lan.lan_addresses``: what students' machines reach, where its name often does
+    not resolve), ``localhost`` if it has none; bound to loopback, ``localhost``; else the
+    address it is bound to.
+    """
+    given = getattr(args, "public_host", None)
+    if given:
+        return str(given)
+    bind = args.host
     if bind in ("0.0.0.0", "::", ""):
-        return socket.gethostname()
-    return "localhost" if bind == "127.0.0.1" else bind
+        addresses = lan_addresses()
+        return addresses[0] if addresses else "localhost"
+    return "localhost" if bind in ("127.0.0.1", "::1", "localhost") else bind
 
 
 def dashboard_url(host: str, http_port: int, admin_token: str) -> str:
@@ -272,40 +379,52 @@ def dashboard_url(host: str, http_port: int, admin_token: str) -> str:
 
     The page keeps the token for its tab and takes it out of the address bar.
     """
-    return f"http://{_url_name(host)}:{http_port}/class?token={admin_token}"
+    return f"http://{url_name(host)}:{http_port}/class?token={admin_token}"
 
 
-INSTRUCTOR_ROW = "#instructor"
-"""The links file's last row: the dashboard with the instructor's token (not a robot name:
-a ``#`` is never one)."""
+def instructor_links_path(handout: Path) -> Path:
+    """The instructor's own links beside the handout: ``links.csv`` -> ``links.instructor.txt``."""
+    return handout.with_name(f"{handout.stem}.instructor.txt")
 
 
 def write_links(path: Path, classroom: Classroom, host: str, http_port: int,
-                ws_port: int, admin_token: str | None = None) -> None:
-    """The instructor's hand-out: one row per robot (name, page, admin page, WebSocket, token).
+                ws_port: int) -> None:
+    """The students' handout: one row per robot (name, page, admin page, WebSocket, token).
 
     The page URL carries the robot's token in its fragment (``#token=``: never sent to a
-    server; the page keeps it and takes it out of the address bar). With ``admin_token``, a
-    last row ``#instructor`` holds the dashboard's URL with it (keep that row to yourself).
-    Written atomically (a temporary file renamed over it) with mode 0600; a symbolic link at
-    ``path`` is refused, never written through.
+    server; the page keeps it and takes it out of the address bar). No instructor's token,
+    ever (``write_instructor_links`` writes those). CSV with LF line ends (a shell reading a
+    token reads no carriage return); written atomically (a temporary file renamed over it) with mode
+    0600; a symbolic link at ``path`` is refused, never written through.
 
     Raises:
         ConfigError: the file cannot be written, or ``path`` is a symbolic link.
     """
-    name_in_url = _url_name(host)
+    name_in_url = url_name(host)
     text = io.StringIO(newline="")
-    writer = csv.writer(text)
+    writer = csv.writer(text, lineterminator="\n")
     writer.writerow(["name", "page", "admin_page", "websocket", "token"])
     for name in classroom.students:
         token = classroom.token(name)
         page = f"http://{name_in_url}:{http_port}{ROBOTS_PREFIX}{name}/"
         writer.writerow([name, f"{page}#token={token}", f"{page}admin?token={token}",
                          f"ws://{name_in_url}:{ws_port}{ROBOTS_PREFIX}{name}", token])
-    if admin_token is not None:
-        writer.writerow([INSTRUCTOR_ROW, dashboard_url(host, http_port, admin_token), "",
-                         f"ws://{name_in_url}:{ws_port}/", admin_token])
     write_private(path, text.getvalue(), "--links")
+
+
+def write_instructor_links(path: Path, host: str, http_port: int, ws_port: int,
+                           admin_token: str) -> None:
+    """The instructor's own links: the dashboard, the root WebSocket and the token.
+
+    ``KEY=VALUE`` lines (a shell may ``source`` it), LF line ends, mode 0600, written as
+    ``write_private`` writes.
+    """
+    lines = ["# websim: the instructor's links; keep this file to yourself (its token rules "
+             "every robot)",
+             f"dashboard={dashboard_url(host, http_port, admin_token)}",
+             f"websocket=ws://{url_name(host)}:{ws_port}/",
+             f"token={admin_token}"]
+    write_private(path, "\n".join(lines) + "\n", "--links")
 
 
 def write_private(path: Path, text: str, what: str) -> None:
@@ -331,6 +450,6 @@ def write_private(path: Path, text: str, what: str) -> None:
         raise ConfigError(f"{what} {path}: cannot write: {error.strerror}") from None
 
 
-def _url_name(hostname: str) -> str:
+def url_name(hostname: str) -> str:
     """A host name as it stands in a URL (IPv6 addresses in brackets)."""
     return f"[{hostname}]" if ":" in hostname else hostname

@@ -40,7 +40,8 @@ class ClientLimits:
             it the connection closes (1008).
         max_frame_bytes: largest incoming WebSocket message; larger ones close it (1009).
         max_queued_bytes: all frames waiting to be sent to one client (topic frames and
-            replies); beyond it the client is closed (1008): it is not reading.
+            replies); a topic frame beyond it makes room by dropping the oldest topic frames
+            (``outbox.Outbox``); replies beyond it close the client (1008).
         max_ids_per_topic: subscribe ids one client may hold on one topic.
         max_subscriptions: topics one client may subscribe to at once.
         max_advertised: topics one client may advertise at once.

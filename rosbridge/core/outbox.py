@@ -7,9 +7,13 @@ promises). ``queue_length`` 0 (both libraries' default) means what it means in r
 with no throttle: every message is sent, a burst of ten published at once included; only
 while the client is ``behind`` (its socket does not take what is written) does such a topic
 keep just its newest frame. Replies (service responses, statuses) are never dropped.
-Everything waiting is counted in bytes: past ``max_bytes``, or past ``max_replies`` replies,
-the outbox is marked ``overflowed`` with the reason, and the server closes the client (it is
-not reading).
+Everything waiting is counted in bytes, and bounded by ``max_bytes``: a topic frame that
+would pass it makes room by dropping the oldest topic frames waiting (of any topic; never one
+half sent), so a client is never closed for what others published, however much of it comes
+at once (32 publishers bursting 1 MB each closed a subscriber that read at full speed). Only
+its replies past ``max_bytes``, or past ``max_replies`` replies, mark the outbox
+``overflowed`` with the reason, and the server closes the client; a client that stops
+reading altogether is closed by its connection's watchdog (``stall_timeout_s``).
 
 A topic frame may be ``Deferred``: an expensive format (``png``, ``cbor-raw``, fragments) is
 made when the frame is taken to be written, not when it is queued, so its cost falls on the
@@ -88,8 +92,14 @@ class Outbox:
         self._max_replies = max_replies
         self.queued_bytes = 0
         """Bytes of every frame waiting."""
+        self._reply_bytes = 0
+        self._sending: int | None = None
+        """The sequence number of the topic message whose frames are half sent, if any."""
         self.dropped = 0
         """Topic frames dropped because a newer one replaced them."""
+        self.sent = 0
+        """Topic messages taken to be written (``pop``, ``take``): with ``dropped`` and what
+        waits, every topic message queued is accounted for."""
         self.overflowed: str | None = None
         """Why the client must be closed (it let too much pile up), or None."""
         self.behind = False
@@ -102,12 +112,18 @@ class Outbox:
         return len(self._replies) + sum(len(queue) for queue in self._topics.values())
 
     def put_reply(self, frame: Frames) -> None:
-        """Queue a reply; past the reply or byte budget, mark the outbox overflowed."""
+        """Queue a reply, making room by dropping topic frames (``_make_room``).
+
+        Past the reply budget, or with the replies alone past the byte budget, the outbox is
+        marked overflowed.
+        """
         if len(self._replies) >= self._max_replies:
             self._overflow(f"{self._max_replies} replies unread")
             return
         self._replies.append(frame)
-        self._grow(_size(frame))
+        self._reply_bytes += _size(frame)
+        self.queued_bytes += _size(frame)
+        self._make_room(None)
 
     def put_topic(self, topic: str, frame: Entry, queue_length: int) -> None:
         """Queue a topic frame, keeping the newest ``queue_length`` for ``topic``.
@@ -127,8 +143,50 @@ class Outbox:
         if len(queue) == limit:
             self.dropped += 1
             self.queued_bytes -= _size(queue[0][1])
-        queue.append((next(self._sequence), frame))
-        self._grow(_size(frame))
+        sequence = next(self._sequence)
+        queue.append((sequence, frame))
+        self.queued_bytes += _size(frame)
+        self._make_room(sequence)
+
+    def _make_room(self, keep: int | None) -> None:
+        """Drop the oldest topic frames (but ``keep``) until all fits ``max_bytes``.
+
+        What is left beyond it (the replies alone, or one frame larger than the budget)
+        stays; replies past the budget mark the outbox overflowed.
+        """
+        while self.queued_bytes > self._max_bytes and self._drop_oldest_topic_frame(keep):
+            pass
+        if self._reply_bytes > self._max_bytes:
+            self._overflow(f"more than {self._max_bytes} bytes of replies waiting to be sent")
+
+    def _drop_oldest_topic_frame(self, keep: int | None) -> bool:
+        """Drop the oldest topic frame waiting but ``keep`` and a half-sent one; whether any.
+
+        Takes the head of the queue whose head is oldest: what ``queue_length`` would drop
+        first anyway.
+        """
+        oldest: deque[tuple[int, Entry]] | None = None
+        for queue in self._topics.values():
+            if not queue:
+                continue
+            head = queue[0][0] if queue[0][0] != self._sending else (
+                queue[1][0] if len(queue) > 1 else None)
+            if head is None or head == keep:
+                continue
+            if oldest is None or head < self._head_of(oldest):
+                oldest = queue
+        if oldest is None:
+            return False
+        index = 0 if oldest[0][0] != self._sending else 1
+        _, dropped = oldest[index]
+        del oldest[index]
+        self.dropped += 1
+        self.queued_bytes -= _size(dropped)
+        return True
+
+    def _head_of(self, queue: deque[tuple[int, Entry]]) -> int:
+        """The sequence of the first frame of ``queue`` that may be dropped."""
+        return queue[0][0] if queue[0][0] != self._sending else queue[1][0]
 
     def discard_topic(self, topic: str) -> None:
         """Forget frames of a topic the client unsubscribed from."""
@@ -161,6 +219,7 @@ class Outbox:
             entry = self._replies.popleft()
             if isinstance(entry, tuple) and len(entry) > 1:
                 self._replies.appendleft(entry[1:])
+            self._reply_bytes -= len(entry[0] if isinstance(entry, tuple) else entry)
         else:
             oldest: deque[tuple[int, Entry]] | None = None
             for queue in self._topics.values():
@@ -170,8 +229,12 @@ class Outbox:
                 return None
             sequence, waiting = oldest.popleft()
             entry = self._made(waiting)
+            self._sending = None
             if isinstance(entry, tuple) and len(entry) > 1:
                 oldest.appendleft((sequence, entry[1:]))
+                self._sending = sequence
+            else:
+                self.sent += 1
         frame = entry[0] if isinstance(entry, tuple) else entry
         self.queued_bytes -= len(frame)
         return frame
@@ -189,7 +252,10 @@ class Outbox:
             return frames
         frames = _flat(list(self._replies))
         self._replies.clear()
+        self._reply_bytes = 0
+        self._sending = None
         topic_frames = [entry for queue in self._topics.values() for entry in queue]
+        self.sent += len(topic_frames)
         if topic_frames:
             topic_frames.sort(key=_sequence_of)
             frames.extend(_flat([self._made(frame) for _, frame in topic_frames]))
@@ -197,11 +263,6 @@ class Outbox:
                 queue.clear()
         self.queued_bytes = 0
         return frames
-
-    def _grow(self, size: int) -> None:
-        self.queued_bytes += size
-        if self.queued_bytes > self._max_bytes:
-            self._overflow(f"more than {self._max_bytes} bytes waiting to be sent")
 
     def _overflow(self, reason: str) -> None:
         if self.overflowed is None:

@@ -147,6 +147,8 @@ class Session:
             encoded.
         may_drive: whether it may change the robot (``access.DriveRules``): a class robot's
             client with neither its token nor the instructor's may only watch.
+        instructor: whether its admin rights are the instructor's (the class's admin token),
+            not only a robot's own token's (its owner's): the dashboard counts them apart.
 
     Attributes:
         advertised: topic -> {advertise id: type}; a topic stays advertised while any id does.
@@ -164,8 +166,10 @@ class Session:
     def __init__(self, peer: str, is_admin: bool, outbox: Outbox | None = None, *,
                  limits: ClientLimits | None = None,
                  clock: Clock | None = None, namespace: str = "",
-                 may_drive: bool = True) -> None:
+                 may_drive: bool = True, instructor: bool = False) -> None:
         self.peer = peer
+        self.instructor = instructor
+        """Whether it presented the instructor's token (not only its robot's)."""
         self.namespace = namespace
         self.is_admin = is_admin
         self.may_drive = may_drive

@@ -26,7 +26,10 @@ having none.
 
 Everything a client can make it hold is bounded (``RepublisherLimits``): republications per
 client and per bridge, frames per request, the rate and the timeout (refused outside their
-ranges, with the reason); a client's republications go when it leaves. The buffer listens to
+ranges, with the reason); a client's republications go when it leaves. The bridge's share
+belongs to its owner: clients that may only watch (``Session.may_drive`` false: a class
+robot's visitors without its token) hold together at most what the owner's reserve leaves,
+so however many watch, the robot's own page and code get theirs. The buffer listens to
 ``/tf`` and ``/tf_static`` only while some republication exists (so a robot that builds only
 what is subscribed builds ``/tf`` then), and is emptied when the last one goes.
 
@@ -97,6 +100,8 @@ class RepublisherLimits:
             subscribers (a ros3djs page asks again at every new frame and drops the old
             topic), or is refused if all have some.
         per_bridge: republications of all clients together.
+        owner_reserve: of ``per_bridge``, what only clients that may drive the robot (its
+            owner, the instructor) may hold: watchers hold the rest at most, together.
         frames: source frames in one request.
         max_rate_hz: the highest rate a request may ask for (Hz); it is sent at most at
             every ``step`` anyway.
@@ -105,6 +110,7 @@ class RepublisherLimits:
 
     per_client: int = 8
     per_bridge: int = 64
+    owner_reserve: int = 16
     frames: int = 32
     max_rate_hz: float = 100.0
     max_timeout_s: float = 60.0
@@ -283,6 +289,12 @@ class TfRepublisher:
         if self.held() >= limits.per_bridge:
             raise error(f"{name}: this robot's TF republisher serves {limits.per_bridge} "
                         "republications already; try again later")
+        watchers_share = limits.per_bridge - limits.owner_reserve
+        if not session.may_drive and sum(not rep.owner.may_drive for rep in
+                                         self._republications) >= watchers_share:
+            raise error(f"{name}: this robot's watchers hold {watchers_share} TF "
+                        f"republications already; the other {limits.owner_reserve} are kept "
+                        "for its owner (connect with the robot's token to use them)")
 
     def _new_topic(self) -> str:
         """The next ``/tf_repub_N`` no one else uses."""

@@ -19,6 +19,7 @@ buffer is capped.
 from __future__ import annotations
 
 import abc
+import dataclasses
 import hmac
 import http
 import json
@@ -193,7 +194,7 @@ class WebSocketFront(abc.ABC):
         routed = self.find(path)
         if isinstance(routed, str):
             return self._refuse(connection, address, http.HTTPStatus.NOT_FOUND, routed,
-                                "not found")
+                                "not found", self.log_hint(path))
         host, name = routed
         if host is not None and len(host.bridge.sessions) >= self.limits.max_clients:
             return self._refuse(connection, address, http.HTTPStatus.SERVICE_UNAVAILABLE,
@@ -220,11 +221,22 @@ class WebSocketFront(abc.ABC):
         """
         return self.route(path)
 
+    def log_hint(self, path: str) -> str:
+        """What the log adds to a refusal of ``path`` that the client is not told."""
+        return ""
+
     def _refuse(self, connection: ServerConnection, address: str, status: http.HTTPStatus,
-                reason: str, kind: str) -> Response:
-        """The refusal ``reason`` with ``status``, logged once per kind and address a while."""
-        self.refusals.note(address, kind, f"refused a WebSocket ({status.value}): {reason}")
-        return connection.respond(status, f"{reason}\n")
+                reason: str, kind: str, hint: str = "") -> Response:
+        """The refusal ``reason`` with ``status``, logged once per kind and address a while.
+
+        The reason is the body and the status line's reason phrase too (what clients that
+        print no body show: roslibpy says "upgrade failed [404]: <phrase>"); ``hint`` goes to
+        the log only.
+        """
+        self.refusals.note(address, kind,
+                           f"refused a WebSocket ({status.value}): {reason}{hint}")
+        response = connection.respond(status, f"{reason}\n")
+        return dataclasses.replace(response, reason_phrase=reason_phrase(reason))
 
     def _check_origin(self, connection: ServerConnection, request: Request,
                       address: str) -> Response | None:
@@ -266,6 +278,7 @@ class WebSocketFront(abc.ABC):
             client = BridgeConnection(host.bridge, host.schedule, connection, peer, is_admin,
                                       self.limits, self.wire, self.clock, budget, robot_budget)
             client.session.may_drive = self.may_drive(name, is_admin)
+            client.session.instructor = self.is_admin_token(token)
             client.session.url_path = target.path
             await client.run()
         finally:
@@ -278,6 +291,16 @@ class WebSocketFront(abc.ABC):
 
     def _uptime_s(self) -> float:
         return round(self.clock.monotonic_s() - self.started_monotonic_s, 3)
+
+
+MAX_REASON_PHRASE_CHARS = 160
+"""The longest reason phrase of a refusal's status line (the reason, cut)."""
+
+
+def reason_phrase(reason: str) -> str:
+    """``reason`` as an HTTP status line may carry it: printable ASCII, one line, cut."""
+    printable = "".join(char if " " <= char <= "~" else "?" for char in reason.split("\n")[0])
+    return printable[:MAX_REASON_PHRASE_CHARS]
 
 
 def json_response(body: Any, status: http.HTTPStatus = http.HTTPStatus.OK) -> Response:

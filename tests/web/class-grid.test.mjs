@@ -8,11 +8,18 @@ import {
 import { parseStatus } from '../../web-interface/js/class-state.js';
 import { robot } from './robot.mjs';
 
-test('clients: all of them, the admins (the dashboard is one) counted apart', () => {
+test('clients: the students\' (the owner\'s page among them), not the instructor\'s', () => {
   assert.equal(clientsText(null), '–');
   assert.equal(clientsText(parseStatus({})), '–');
-  assert.equal(clientsText(parseStatus({ client_count: 0, admin_count: 0 })), '0');
-  assert.equal(clientsText(parseStatus({ client_count: 3, admin_count: 1 })), '3 (1 admin)');
+  const status = (clients, owners, instructors) => parseStatus({
+    client_count: clients, admin_count: owners + instructors, owner_count: owners,
+    instructor_count: instructors,
+  });
+  assert.equal(clientsText(status(1, 0, 1)), '0', 'the dashboard alone');
+  assert.equal(clientsText(status(3, 1, 1)), '2 (owner)', 'the owner is a student, no admin');
+  assert.equal(clientsText(status(4, 2, 1)), '3 (owner ×2)');
+  assert.equal(clientsText(parseStatus({ client_count: 3, admin_count: 1 })), '2',
+    'an older server: the admins left out');
 });
 
 test('payload ×1 and ×2 by robot.json\'s defaults, another one by its mass', () => {

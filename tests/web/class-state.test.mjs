@@ -18,8 +18,11 @@ const odometry = (x, v, frame) => ({
 
 const STATUS = {
   name: 'alice',
-  client_count: 2,
-  admin_count: 1,
+  client_count: 3,
+  admin_count: 2,
+  owner_count: 1,
+  instructor_count: 1,
+  recording: 'recording stopped: it reached its size limit (1000 MB)',
   last_driver: '10.0.0.5:51234',
   last_drive_age_s: 0.4,
   collisions: 3,
@@ -32,9 +35,12 @@ const STATUS = {
 
 test('a status answer is read field by field; what is missing or ill-typed reads null', () => {
   assert.deepEqual(parseStatus(STATUS), {
-    clientCount: 2,
-    admins: 1,
-    students: 1,
+    clientCount: 3,
+    admins: 2,
+    owners: 1,
+    instructors: 1,
+    students: 2,
+    recording: 'recording stopped: it reached its size limit (1000 MB)',
     lastDriver: '10.0.0.5:51234',
     lastDriveAgeS: 0.4,
     collisions: 3,
@@ -49,7 +55,8 @@ test('a status answer is read field by field; what is missing or ill-typed reads
     client_count: -1, admin_count: 1.5, last_driver: null, last_drive_age_s: null,
     collisions: 1.5, mode: '', mass_kg: 'heavy', paused: 'yes', speed_mps: null,
   });
-  for (const key of ['clientCount', 'admins', 'students', 'lastDriver', 'lastDriveAgeS',
+  for (const key of ['clientCount', 'admins', 'owners', 'instructors', 'students',
+    'recording', 'lastDriver', 'lastDriveAgeS',
     'collisions', 'mode', 'massKg', 'inertiaKgM2', 'paused', 'held', 'speedMps']) {
     assert.equal(odd[key], null, key);
   }
@@ -162,5 +169,5 @@ test('the class at a glance counts robots, drivers, paused robots and students',
   onStatus(states[0], STATUS, 0);
   onStatus(states[1], { ...STATUS, last_drive_age_s: 60, paused: true, speed_mps: 0 }, 0);
   assert.deepEqual(classSummary(new Set(states).values(), 0),
-    { robots: 3, driving: 1, held: 1, students: 2 });
+    { robots: 3, driving: 1, held: 1, students: 4 });
 });

@@ -26,6 +26,8 @@ test('workers.json as websim nginx-config writes it: each path once, in order', 
 });
 
 test('no workers.json, or no answer: a single process, one root as before', async () => {
+  assert.equal(await loadWorkers(answer(200, '{"about": "one process", "workers": null}')),
+    null, 'websim serve\'s own answer');
   assert.equal(await loadWorkers(answer(404, 'not json')), null);
   assert.equal(await loadWorkers(async () => { throw new TypeError('offline'); }), null);
   const root = rootWsUrl({ protocol: 'http:', hostname: 'lab', host: 'lab:8080' }, null);

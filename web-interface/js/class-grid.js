@@ -27,11 +27,16 @@ export function byName(a, b) {
   return a.localeCompare(b, undefined, { numeric: true, sensitivity: 'base' });
 }
 
-/** The clients line of a status: "3", or "3 (1 admin)"; the dashboard is an admin client. */
+/**
+ * The clients line of a status: the students' clients, the instructor's (this dashboard is
+ * one) left out: "2", or "2 (owner)" when the robot's own page or code (its token) is among
+ * them, "3 (owner ×2)" with two.
+ */
 export function clientsText(status) {
-  if (!status || status.clientCount === null) return '–';
-  const total = status.clientCount;
-  return status.admins ? `${total} (${status.admins} admin)` : `${total}`;
+  if (!status || status.students === null) return '–';
+  const { students, owners } = status;
+  if (!owners) return `${students}`;
+  return owners === 1 ? `${students} (owner)` : `${students} (owner ×${owners})`;
 }
 
 /** The payload badge: ×1, ×2 (robot.json's mass and inertia times that), else the mass. */
@@ -108,7 +113,7 @@ export class ClassGrid {
         state, element, visible: true, shown: new Map(),
         thumb: new RobotThumb(canvas, this.robot),
         fields: Object.fromEntries(['speed', 'pose', 'clients', 'collisions', 'driver', 'error',
-          'held', 'mode', 'payload'].map((name) => [name, field(name)])),
+          'held', 'mode', 'payload', 'recording'].map((name) => [name, field(name)])),
         buttons: Object.fromEntries(['reset', 'pause', 'mode', 'payload']
           .map((name) => [name, action(name)])),
       };
@@ -174,6 +179,9 @@ export class ClassGrid {
     const error = state.commandError || state.statusError;
     text('error', error);
     attr('error-hidden', fields.error, 'hidden', error ? null : '');
+    const recording = status?.recording ?? '';
+    text('recording', recording);
+    attr('recording-hidden', fields.recording, 'hidden', recording ? null : '');
     attr('stale', card.element, 'data-stale', statusStale(state, nowMs) ? '' : null);
     attr('held-card', card.element, 'data-held', isHeld(state) ? '' : null);
 

@@ -90,20 +90,31 @@ const countOrNull = (value) => (Number.isInteger(value) && value >= 0 ? value : 
 
 /**
  * A robot's status (an entry of /websim/class_status, or a /websim/status answer) as the
- * dashboard reads it: {clientCount, admins, students, lastDriver, lastDriveAgeS, collisions,
- * mode, massKg, inertiaKgM2, paused, held, speedMps}. A field that is missing or of the wrong
- * type reads null. `admins` are the clients with the robot's or the instructor's token (the
- * dashboard is one), `students` the others. `held` is the instructor's pause; a server that
- * does not tell it apart from `paused` (an idle robot pauses too) gets `paused` for it.
+ * dashboard reads it: {clientCount, admins, owners, instructors, students, recording,
+ * lastDriver, lastDriveAgeS, collisions, mode, massKg, inertiaKgM2, paused, held, speedMps}.
+ * A field that is missing or of the wrong type reads null. `admins` are the clients with the
+ * robot's or the instructor's token; of them `owners` have the robot's own (its student's
+ * page and code) and `instructors` the instructor's (the dashboard is one). `students` are
+ * every client but the instructor's: the owner's page is a student's, not an admin's (a server
+ * that does not count instructors apart: every client but the admins, as before).
+ * `recording`: what is wrong with the robot's recording, if anything. `held` is the
+ * instructor's pause; a server that does not tell it apart from `paused` (an idle robot
+ * pauses too) gets `paused` for it.
  */
 export function parseStatus(values) {
   const clientCount = countOrNull(values?.client_count);
   const admins = countOrNull(values?.admin_count);
+  const instructors = countOrNull(values?.instructor_count);
   const paused = boolOrNull(values?.paused);
+  const notStudents = instructors ?? admins;
   return {
     clientCount,
     admins,
-    students: clientCount === null || admins === null ? null : Math.max(0, clientCount - admins),
+    owners: countOrNull(values?.owner_count),
+    instructors,
+    students: clientCount === null || notStudents === null ? null
+      : Math.max(0, clientCount - notStudents),
+    recording: textOrNull(values?.recording),
     lastDriver: textOrNull(values?.last_driver),
     lastDriveAgeS: finiteOrNull(values?.last_drive_age_s),
     collisions: Number.isInteger(values?.collisions) ? values.collisions : null,

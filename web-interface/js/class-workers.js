@@ -42,9 +42,10 @@ export function parseWorkers(document) {
 }
 
 /**
- * The page server's worker paths (parseWorkers), or null when it has no workers.json (a 404:
- * one process serves the class) or does not answer. Throws WorkersError for a document that
- * is there but wrong: guessing a single process then would show an empty class.
+ * The page server's worker paths (parseWorkers), or null when one process serves the class:
+ * its workers.json says {"workers": null} (websim serve's own), or it has none (a 404) or does
+ * not answer. Throws WorkersError for a document that is there but wrong: guessing a single
+ * process then would show an empty class.
  */
 export async function loadWorkers(fetchImpl = globalThis.fetch) {
   let response;
@@ -60,6 +61,7 @@ export async function loadWorkers(fetchImpl = globalThis.fetch) {
   } catch (error) {
     throw new WorkersError(`not JSON (${error.message})`);
   }
+  if (document?.workers === null) return null;
   return parseWorkers(document);
 }
 

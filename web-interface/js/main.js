@@ -5,11 +5,12 @@ import {
   Connection, initialWsUrl, keepRobotToken, loadSiteConfig, ownWsUrl, takeRobotToken,
 } from './connection.js';
 import { bindConnectionBar, runFrameLoop } from './connection-bar.js';
-import { createState } from './state.js';
+import { createState, forgetPast } from './state.js';
 import { LivePlots } from './plots.js';
 import { PidPanel } from './pid-panel.js';
 import { Readouts } from './readouts.js';
 import { showYourRobot } from './your-robot.js';
+import { Player } from './player.js';
 import {
   $, closeWithPage, createTeleop, createView, keepBridgeOnNavigation, librariesLoaded,
   robotDescription, showFatal, subscribeRobot,
@@ -44,6 +45,10 @@ async function main() {
       }).catch(() => {}); // not this page's robot: it watches
     });
   }
+  if (config.replay) { // websim replay: a player, nothing to drive
+    replayPage(connection, state, robot, config.replay);
+    return;
+  }
   const bar = bindConnectionBar(connection, {
     form: $('#connect-form'), input: $('#ws-url'), status: $('#conn-status'),
     message: $('#view-message'), otherDriver: $('#other-driver'),
@@ -71,6 +76,35 @@ async function main() {
     (now) => readouts.update(now), (now) => bar.update(now, state));
   connection.connect();
   window.websim = { connection, robot, state, view, teleop, pid, plots, headingPlot }; // console
+}
+
+/**
+ * The page of a replay (websim replay): the view, readouts and plots of the recording, and a
+ * player (play, pause, seek, speed) instead of the drive pad, the PID panel and the notices of
+ * other drivers: a recording is not driven.
+ */
+function replayPage(connection, state, robot, service) {
+  document.body.dataset.mode = 'replay';
+  document.title = 'websim — replay';
+  $('.brand-sub').textContent = 'replay of a recording';
+  const bar = bindConnectionBar(connection, {
+    form: $('#connect-form'), input: $('#ws-url'), status: $('#conn-status'),
+    message: $('#view-message'),
+  }, robot);
+  subscribeRobot(connection, state, robot);
+  const view = createView(state, robot);
+  const plots = new LivePlots($('#plots'), state, ['linear', 'angular'],
+    { tools: $('#plots-tools') });
+  const readouts = new Readouts(connection, state, $('#readouts'), robot);
+  const player = new Player(connection, service, {
+    card: $('#player'), toggle: $('#player-toggle'), seek: $('#player-seek'),
+    time: $('#player-time'), speed: $('#player-speed'), message: $('#player-message'),
+  }, { onSeek: () => forgetPast(state) });
+  closeWithPage(connection);
+  runFrameLoop((now) => view.draw(now), (now) => plots.update(now),
+    (now) => readouts.update(now), (now) => bar.update(now, state));
+  connection.connect();
+  window.websim = { connection, robot, state, view, plots, player }; // console
 }
 
 main().catch((error) => showFatal(`The page could not start: ${error.message}`));

@@ -206,6 +206,13 @@ export function clearTrail(state) {
   state.trail = { frame: null, points: [] };
 }
 
+/** Forgets the past the page holds (a replay jumped in time): trail, plots' history, poses. */
+export function forgetPast(state) {
+  clearTrail(state);
+  for (const values of Object.values(state.history)) values.length = 0;
+  state.poses = { map: [], odom: [] };
+}
+
 function extendTrail(state, pose, frame, nowMs) {
   const trail = state.trail;
   if (trail.frame !== frame) {
