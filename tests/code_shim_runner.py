@@ -20,7 +20,6 @@ import runpy
 import sys
 import threading
 from pathlib import Path
-from typing import Any
 
 SHIM_DIR = Path(__file__).resolve().parent.parent / "web-interface" / "python"
 
@@ -96,17 +95,12 @@ class WebSocketTransport:
         return frames
 
     def pause(self, timeout_s: float) -> None:
-        _sleep(timeout_s)
-
-
-_sleep: Any = None
+        import websim_browser
+        websim_browser.real_sleep(timeout_s)
 
 
 def main(argv: list[str]) -> int:
     """Install the shim, run the program as ``__main__``; the program's exit code."""
-    global _sleep
-    import time
-    _sleep = time.sleep  # the real one, before install() replaces it
     sys.path.insert(0, str(SHIM_DIR))
     import websim_browser
     websim_browser.install(WebSocketTransport(os.environ.get("WEBSIM_SHIM_URL")))

@@ -56,7 +56,8 @@ from websim.web_files import CONTENT_TYPES, published
 
 log = logging.getLogger("websim.http")
 
-PAGE_ROUTES = {"/": "index.html", "/admin": "admin.html", "/class": "class.html"}
+PAGE_ROUTES = {"/": "index.html", "/admin": "admin.html", "/class": "class.html",
+               "/submissions": "submissions.html"}
 """Clean URLs the course uses, mapped to files of the web folder."""
 
 COMPRESSIBLE = frozenset({".html", ".js", ".mjs", ".css", ".json", ".map", ".svg", ".py",

@@ -6,11 +6,15 @@
 // rule, so a keyboard user is never trapped). Touch: CodeMirror's own text input.
 
 import { basicSetup, EditorView } from 'codemirror';
-import { Compartment, EditorState, Prec } from '@codemirror/state';
+import {
+  Compartment, EditorState, Prec, StateEffect,
+} from '@codemirror/state';
 import { keymap } from '@codemirror/view';
 import { indentWithTab } from '@codemirror/commands';
 import { ensureSyntaxTree, indentUnit } from '@codemirror/language';
-import { linter, lintGutter, setDiagnostics } from '@codemirror/lint';
+import {
+  forceLinting, forEachDiagnostic, linter, lintGutter,
+} from '@codemirror/lint';
 import { python } from '@codemirror/lang-python';
 import { javascript } from '@codemirror/lang-javascript';
 
@@ -40,10 +44,14 @@ export function syntaxErrors(state, budgetMs = PARSE_BUDGET_MS) {
   return found;
 }
 
-/** Syntax errors as the student types, at their lines (the parser's, before any run). */
-const syntaxCheck = linter((view) => syntaxErrors(view.state).slice(0, 20).map((p) => ({
-  from: p.from, to: p.to, severity: 'error', message: 'syntax error',
-})), { delay: 600 });
+/** Tells the checker that a run's problems changed (no edit did). */
+const refreshProblems = StateEffect.define();
+
+/** The diagnostics of a line's problem ({line, message, severity}) in `state`. */
+function lineDiagnostic(state, problem) {
+  const line = state.doc.line(problem.line);
+  return { from: line.from, to: line.to, severity: problem.severity || 'error', message: problem.message };
+}
 
 const theme = EditorView.theme({
   '&': { fontSize: '14px', border: '1px solid #cbd5e1', borderRadius: '8px', background: '#fff' },
@@ -61,6 +69,22 @@ export function createEditor(parent, {
   text = '', language = 'python', label, onChange, onRun,
 }) {
   const languageSlot = new Compartment();
+  // What the last run found (its crash, a callback's exception): shown until the next edit,
+  // with the syntax errors the parser finds as the student types.
+  let runProblems = [];
+  const check = linter((view) => {
+    const { state } = view;
+    const syntax = syntaxErrors(state).slice(0, 20).map((p) => ({
+      from: p.from, to: p.to, severity: 'error', message: 'syntax error',
+    }));
+    const run = runProblems.filter((p) => p.line >= 1 && p.line <= state.doc.lines)
+      .map((p) => lineDiagnostic(state, p));
+    return [...run, ...syntax.filter((d) => !run.some((r) => r.from <= d.from && d.from <= r.to))];
+  }, {
+    delay: 600,
+    needsRefresh: (update) => update.transactions.some(
+      (transaction) => transaction.effects.some((effect) => effect.is(refreshProblems))),
+  });
   const view = new EditorView({
     parent,
     state: EditorState.create({
@@ -71,11 +95,13 @@ export function createEditor(parent, {
         keymap.of([indentWithTab]),
         languageSlot.of(LANGUAGES[language]()),
         lintGutter(),
-        syntaxCheck,
+        check,
         theme,
         EditorView.contentAttributes.of({ 'aria-label': label, spellcheck: 'false', autocapitalize: 'off', autocorrect: 'off' }),
         EditorView.updateListener.of((update) => {
-          if (update.docChanged && onChange) onChange(update.state.doc.toString());
+          if (!update.docChanged) return;
+          runProblems = [];
+          if (onChange) onChange(update.state.doc.toString());
         }),
       ],
     }),
@@ -91,12 +117,21 @@ export function createEditor(parent, {
       view.dispatch({ effects: languageSlot.reconfigure(LANGUAGES[name]()) });
     },
     showProblems(problems) {
-      const { doc } = view.state;
-      const diagnostics = problems.filter((p) => p.line >= 1 && p.line <= doc.lines).map((p) => {
-        const line = doc.line(p.line);
-        return { from: line.from, to: line.to, severity: p.severity || 'error', message: p.message };
+      runProblems = problems;
+      view.dispatch({ effects: refreshProblems.of(null) });
+      forceLinting(view); // now, not after the typing delay
+    },
+    /** The problems shown: [{line, severity, message}]. */
+    problems() {
+      const shown = [];
+      forEachDiagnostic(view.state, (diagnostic, from) => {
+        shown.push({
+          line: view.state.doc.lineAt(from).number,
+          severity: diagnostic.severity,
+          message: diagnostic.message,
+        });
       });
-      view.dispatch(setDiagnostics(view.state, diagnostics));
+      return shown;
     },
     /** The first syntax error's line, or null. */
     firstSyntaxError() {

@@ -16,11 +16,9 @@
 (function setUpWorker() {
   'use strict';
 
-  const OUTPUT_LINES = 500;
-  const OUTPUT_PERIOD_MS = 50;
   const LINE_CHARS = 4000;
 
-  const output = { lines: [], dropped: 0, timer: null };
+  let outputGate = null; // [lines posted, not yet read by the page; lines dropped] (shared)
   const timers = new Set();
   const sockets = new Set();
   const openSockets = new Set();
@@ -32,28 +30,21 @@
     self.postMessage(message);
   }
 
-  function flushOutput() {
-    clearTimeout(output.timer);
-    output.timer = null;
-    if (!output.lines.length && !output.dropped) return;
-    post({ type: 'output', lines: output.lines, dropped: output.dropped });
-    output.lines = [];
-    output.dropped = 0;
-  }
-
+  /** Each line to the page at once, unless it has too many unread: then counted, dropped
+   *  (the same rule as the Python worker's). */
   function print(stream, args) {
     const text = args.map((value) => (typeof value === 'string' ? value : describe(value)))
       .join(' ');
     for (const piece of text.split('\n')) {
+      if (Atomics.load(outputGate, 0) >= outputGate.limit) {
+        Atomics.add(outputGate, 1, 1);
+        continue;
+      }
       const line = piece.length > LINE_CHARS
         ? `${piece.slice(0, LINE_CHARS)}… (${piece.length - LINE_CHARS} more characters)` : piece;
-      output.lines.push([stream, line]);
+      Atomics.add(outputGate, 0, 1);
+      post({ type: 'output', lines: [[stream, line]] });
     }
-    if (output.lines.length > OUTPUT_LINES) {
-      output.dropped += output.lines.length - OUTPUT_LINES;
-      output.lines.splice(0, output.lines.length - OUTPUT_LINES);
-    }
-    if (output.timer === null) output.timer = originalSetTimeout(flushOutput, OUTPUT_PERIOD_MS);
   }
 
   function describe(value) {
@@ -87,7 +78,6 @@
   function end(status, code, text = '', line = null) {
     if (ended) return;
     ended = true;
-    flushOutput();
     post({ type: 'ended', status, code, text: readable(text), line });
   }
 
@@ -221,6 +211,8 @@
     const message = event.data;
     if (message.type !== 'run' || started) return;
     program = { filename: message.filename, blobUrl: '' };
+    outputGate = new Int32Array(message.output);
+    outputGate.limit = message.outputLimit;
     self.WebSocket = robotSocketClass(message.robotUrl);
     self.window = self; // roslib's browser build reads window.WebSocket, window.DOMParser...
     importScripts(message.roslibUrl); // roslib binds its WebSocket now: the robot's

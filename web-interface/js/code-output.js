@@ -11,13 +11,14 @@ export class OutputPane {
     this.maxLines = maxLines;
     this.schedule = schedule;
     this.lines = []; // [kind, text]: stdout, stderr, note
-    this.dropped = 0;
+    this.dropped = 0; // lines the pane let go of (the oldest)
+    this.skipped = 0; // lines the program printed faster than the page took them
     this.pending = false;
   }
 
   /** Add lines ([[kind, text]]); `dropped`: lines the program printed that never got here. */
   add(lines, dropped = 0) {
-    if (dropped) this.lines.push(['note', `… ${dropped} lines printed too fast were not shown`]);
+    this.skipped += dropped;
     for (const line of lines) this.lines.push(line);
     if (this.lines.length > this.maxLines) {
       this.dropped += this.lines.length - this.maxLines;
@@ -33,6 +34,7 @@ export class OutputPane {
   clear() {
     this.lines = [];
     this.dropped = 0;
+    this.skipped = 0;
     this._draw();
   }
 
@@ -49,10 +51,13 @@ export class OutputPane {
       const stick = this.element.scrollTop + this.element.clientHeight
         >= this.element.scrollHeight - 4;
       const fragment = document.createDocumentFragment();
-      if (this.dropped) {
+      const missing = [];
+      if (this.dropped) missing.push(`${this.dropped} earlier lines not shown`);
+      if (this.skipped) missing.push(`${this.skipped} lines printed too fast to show`);
+      if (missing.length) {
         const head = document.createElement('span');
         head.className = 'note';
-        head.textContent = `… ${this.dropped} earlier lines not shown\n`;
+        head.textContent = `… ${missing.join('; ')}\n`;
         fragment.append(head);
       }
       for (const [kind, text] of this.lines) {

@@ -14,43 +14,38 @@ import { RingReader } from './code-ring.js';
 
 const PYODIDE_DIR = new URL('../node_modules/pyodide/', import.meta.url).href;
 const SHIM_DIR = new URL('../python/', import.meta.url).href;
-const SHIM_FILES = ['websim_browser.py', 'roslibpy.py', 'websim_worker.py'];
+const SHIM_FILES = ['websim_browser.py', 'websim_worker.py', 'roslibpy/__init__.py',
+  'roslibpy/core.py', 'roslibpy/ros2.py'];
 const HOME = '/home/pyodide';
 
-/** The most output kept here between two posts: older lines are dropped and counted. */
-const OUTPUT_LINES = 500;
-/** Output is posted at most this often (a print flood costs the page 20 messages a second). */
-const OUTPUT_PERIOD_MS = 50;
 /** A longer line is cut (with a note of how much). */
 const LINE_CHARS = 4000;
 
 let pyodide = null;
 let ring = null;
 let interrupt = null;
+let outputGate = null;
 let nextSocket = 1;
-const output = { lines: [], dropped: 0, lastPost: 0 };
 
 function post(message) {
   self.postMessage(message);
 }
 
+/**
+ * Each line goes to the page at once (a program that prints and then computes forever still
+ * shows what it printed), unless the page has not read OUTPUT_IN_FLIGHT lines yet: then it is
+ * dropped and counted (a print flood costs the page a bounded queue). outputGate: [lines
+ * posted and not yet read, lines dropped], shared with the page (code-runner.js).
+ */
 function queueOutput(stream, text) {
+  if (Atomics.load(outputGate, 0) >= outputGate.limit) {
+    Atomics.add(outputGate, 1, 1);
+    return;
+  }
   const line = text.length > LINE_CHARS
     ? `${text.slice(0, LINE_CHARS)}… (${text.length - LINE_CHARS} more characters)` : text;
-  output.lines.push([stream, line]);
-  if (output.lines.length > OUTPUT_LINES) {
-    output.dropped += output.lines.length - OUTPUT_LINES;
-    output.lines.splice(0, output.lines.length - OUTPUT_LINES);
-  }
-  if (performance.now() - output.lastPost >= OUTPUT_PERIOD_MS) flushOutput();
-}
-
-function flushOutput() {
-  output.lastPost = performance.now();
-  if (!output.lines.length && !output.dropped) return;
-  post({ type: 'output', lines: output.lines, dropped: output.dropped });
-  output.lines = [];
-  output.dropped = 0;
+  Atomics.add(outputGate, 0, 1);
+  post({ type: 'output', lines: [[stream, line]] });
 }
 
 /**
@@ -87,14 +82,12 @@ const transport = {
     post({ type: 'close', socket });
   },
   wait(timeoutS) {
-    flushOutput();
     const { frames, pending } = ring.take(timeoutS * 1000, () => interrupt[0] !== 0);
     if (pending) post({ type: 'drained' });
     if (interrupt[0] !== 0) pyodide.checkInterrupt(); // Stop: KeyboardInterrupt, now
     return frames;
   },
   pause(timeoutS) {
-    flushOutput();
     Atomics.wait(new Int32Array(new SharedArrayBuffer(4)), 0, 0, timeoutS * 1000);
     if (interrupt[0] !== 0) pyodide.checkInterrupt();
   },
@@ -110,6 +103,7 @@ async function load({ memoryBytes }) {
     stderr: (text) => queueOutput('stderr', text),
   });
   pyodide.setStdin({ stdin: () => null }); // input(): end of file, at once
+  pyodide.FS.mkdirTree(`${HOME}/roslibpy`);
   for (const name of SHIM_FILES) {
     const response = await fetch(SHIM_DIR + name, { cache: 'no-cache' });
     if (!response.ok) throw new Error(`${name}: HTTP ${response.status}`);
@@ -123,6 +117,8 @@ async function load({ memoryBytes }) {
 function run({ source, filename, env, argv, shared }) {
   ring = new RingReader(shared.ring);
   interrupt = new Int32Array(shared.interrupt);
+  outputGate = new Int32Array(shared.output);
+  outputGate.limit = shared.outputLimit;
   pyodide.setInterruptBuffer(interrupt);
   nextSocket = 1;
   const runner = pyodide.pyimport('websim_worker');
@@ -135,7 +131,6 @@ function run({ source, filename, env, argv, shared }) {
   } finally {
     runner.destroy();
   }
-  flushOutput();
   post({ type: 'ended', ...result });
 }
 

@@ -23,6 +23,9 @@ export const PYTHON_MEMORY_BYTES = 512 * 1024 * 1024;
 /** How long Stop waits for a Python program to end by KeyboardInterrupt before terminating. */
 export const STOP_GRACE_MS = 1000;
 
+/** Lines a program may have sent that the page has not shown yet; more are dropped, counted. */
+export const OUTPUT_IN_FLIGHT = 2000;
+
 /** Frames held on the page while the ring is full (a program busy in a callback): at most. */
 export const PENDING_BYTES = 16 * 1024 * 1024;
 
@@ -60,9 +63,10 @@ export class ProgramRunner extends EventTarget {
   /** Runs a program: {language, source, filename, env}; stops the one running first. */
   async run({ language, source, filename, env }) {
     if (this.run_) this.stop();
+    const outputShared = new SharedArrayBuffer(8);
     const run = {
       language, sockets: new Map(), pending: [], pendingBytes: 0, dropped: 0, ended: false,
-      startedMs: performance.now(),
+      startedMs: performance.now(), outputShared, output: new Int32Array(outputShared),
     };
     this.run_ = run;
     this.language = language;
@@ -80,6 +84,8 @@ export class ProgramRunner extends EventTarget {
       const shared = { ring: createRing(), interrupt: new SharedArrayBuffer(4) };
       run.ring = new RingWriter(shared.ring);
       run.interrupt = new Int32Array(shared.interrupt);
+      shared.output = run.outputShared;
+      shared.outputLimit = OUTPUT_IN_FLIGHT;
       run.listener = (event) => this._onPython(run, event.data);
       python.worker.addEventListener('message', run.listener);
       this._setState('running');
@@ -98,6 +104,7 @@ export class ProgramRunner extends EventTarget {
       this._setState('running');
       worker.postMessage({
         type: 'run', source, filename, env, robotUrl: withToken(url, token), roslibUrl: ROSLIB_URL,
+        output: run.outputShared, outputLimit: OUTPUT_IN_FLIGHT,
       });
     }
   }
@@ -174,7 +181,7 @@ export class ProgramRunner extends EventTarget {
         break;
       }
       case 'drained': this._flush(run); break;
-      case 'output': this._output(message); break;
+      case 'output': this._output(run, message); break;
       case 'ended': this._finish(run, message); break;
       default: break;
     }
@@ -182,7 +189,7 @@ export class ProgramRunner extends EventTarget {
 
   _onJavascript(run, message) {
     if (run.ended) return;
-    if (message.type === 'output') this._output(message);
+    if (message.type === 'output') this._output(run, message);
     else if (message.type === 'note') this.dispatchEvent(new CustomEvent('note', { detail: message }));
     else if (message.type === 'sockets') this._setState(message.open > 0 ? 'connected' : 'running');
     else if (message.type === 'ended') {
@@ -249,8 +256,10 @@ export class ProgramRunner extends EventTarget {
     run.ring.setPending(run.pending.length > 0);
   }
 
-  _output(message) {
-    this.dispatchEvent(new CustomEvent('output', { detail: message }));
+  _output(run, message) {
+    Atomics.sub(run.output, 0, message.lines.length);
+    const dropped = Atomics.exchange(run.output, 1, 0);
+    this.dispatchEvent(new CustomEvent('output', { detail: { lines: message.lines, dropped } }));
   }
 
   _closeSockets(run) {
@@ -264,6 +273,8 @@ export class ProgramRunner extends EventTarget {
     clearTimeout(run.stopping);
     if (run.listener && run.worker) run.worker.removeEventListener('message', run.listener);
     this._closeSockets(run);
+    const lost = Atomics.exchange(run.output, 1, 0); // lines dropped after the last shown
+    if (lost) this.dispatchEvent(new CustomEvent('output', { detail: { lines: [], dropped: lost } }));
     if (result.status !== 'failed') this.stopRobot();
     const status = run.stopRequested && result.status !== 'crashed' ? 'stopped' : result.status;
     if (this.run_ === run) this.run_ = null;

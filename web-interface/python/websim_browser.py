@@ -187,6 +187,7 @@ class Loop:
 
 
 _installed: list[Loop] = []
+_originals: dict[str, Any] = {}
 
 
 def current() -> Loop:
@@ -206,15 +207,29 @@ def install(transport: Transport, *, clock: Callable[[], float] = time.monotonic
     the loop (a new run in the same interpreter).
     """
     loop = Loop(transport, clock, report)
-    if not _installed:
+    if not _originals:
         _patch_time(clock)
         _patch_condition(clock)
     _installed[:] = [loop]
     return loop
 
 
+def uninstall() -> None:
+    """Put ``time.sleep`` and ``threading.Condition.wait`` back as they were."""
+    _installed.clear()
+    if "sleep" in _originals:
+        time.sleep = _originals.pop("sleep")
+    if "wait" in _originals:
+        threading.Condition.wait = _originals.pop("wait")  # type: ignore[method-assign]
+
+
+def real_sleep(seconds: float) -> None:
+    """Sleep without delivering anything (what ``time.sleep`` was before ``install``)."""
+    _originals.get("sleep", time.sleep)(seconds)
+
+
 def _patch_time(clock: Callable[[], float]) -> None:
-    original = time.sleep
+    original = _originals["sleep"] = time.sleep
 
     def sleep(seconds: float) -> None:
         loop = _installed[-1] if _installed else None
@@ -229,7 +244,7 @@ def _patch_time(clock: Callable[[], float]) -> None:
 
 
 def _patch_condition(clock: Callable[[], float]) -> None:
-    original = threading.Condition.wait
+    original = _originals["wait"] = threading.Condition.wait
 
     def wait(self: Any, timeout: float | None = None) -> bool:
         loop = _installed[-1] if _installed else None

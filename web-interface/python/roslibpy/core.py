@@ -1,4 +1,4 @@
-"""roslibpy's API in the browser, over websim_browser's loop: what the course's programs use.
+"""roslibpy's API in the browser (``roslibpy.core``), over websim_browser's loop.
 
 In the browser a program's ``import roslibpy`` finds this module (the page installs it in
 Pyodide's file system), so a file written for ``pip install roslibpy`` runs unchanged:
@@ -41,9 +41,9 @@ REOPENED = "websim:reopened"
 
 _rosapi_timeout_s = [3.0]
 
-__all__ = ["Goal", "GoalStatus", "Header", "Message", "Param", "Result", "Ros",
-           "RosTimeoutError", "Service", "ServiceException", "ServiceRequest",
-           "ServiceResponse", "Time", "Topic", "set_rosapi_timeout"]
+__all__ = ["ActionClient", "Feedback", "Goal", "GoalStatus", "Header", "Message", "Param",
+           "Result", "Ros", "RosTimeoutError", "Service", "ServiceException", "ServiceRequest",
+           "ServiceResponse", "Time", "Topic", "set_default_transport", "set_rosapi_timeout"]
 
 
 def set_rosapi_timeout(timeout: float) -> None:
@@ -86,6 +86,22 @@ class Goal(_Values):
 
 class Result(_Values):
     """An action result."""
+
+
+class Feedback(_Values):
+    """An action's feedback."""
+
+
+class ActionClient:
+    """The action client of roslibpy: not in the browser (the course's programs use none)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        raise NotImplementedError("roslibpy.ActionClient is not available in the browser: run "
+                                  "this program on a laptop with pip install roslibpy")
+
+
+def set_default_transport(name: str) -> None:
+    """Choose roslibpy's transport: there is one here, the page's (nothing to choose)."""
 
 
 class GoalStatus(Enum):
