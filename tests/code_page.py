@@ -98,7 +98,7 @@ def type_program(page: Any, text: str) -> None:
     """Replace the editor's text by keyboard: select all, delete, then the text as typed
     input (Playwright's insertText: the editor sees input events, as from an on-screen
     keyboard or a paste)."""
-    page.click(".cm-content")
+    page.click(".cm-content", position={"x": 20, "y": 8})  # its first line: always shown
     page.keyboard.press("Control+A")
     page.keyboard.press("Delete")
     page.keyboard.insert_text(text)

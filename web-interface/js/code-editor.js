@@ -74,7 +74,8 @@ export function createEditor(parent, {
   let runProblems = [];
   const check = linter((view) => {
     const { state } = view;
-    const syntax = syntaxErrors(state).slice(0, 20).map((p) => ({
+    // the first only: a parser's recovery often flags the lines after it too
+    const syntax = syntaxErrors(state).slice(0, 1).map((p) => ({
       from: p.from, to: p.to, severity: 'error', message: 'syntax error',
     }));
     const run = runProblems.filter((p) => p.line >= 1 && p.line <= state.doc.lines)
