@@ -52,7 +52,7 @@ from aiohttp.abc import AbstractAccessLogger
 from ros_nodes.robot_interface import ROBOTS_PREFIX
 from rosbridge.core.limits import ClientLimits, TrustedProxies, budget_key
 from websim.import_map import with_import_map
-from websim.web_files import CONTENT_TYPES, published
+from websim.web_files import CONTENT_TYPES, PYODIDE_FILES, published
 
 log = logging.getLogger("websim.http")
 
@@ -490,8 +490,24 @@ class HttpServer:
             headers["Content-Encoding"] = "gzip"
         return web.Response(body=asset.gzipped if gzipped else asset.body, headers=headers)
 
-    def _asset(self, url_path: str) -> _Asset | None:
-        """The published file ``url_path`` names, reread when changed (inode, mtime, size)."""
+    def warm(self, relatives: tuple[str, ...]) -> threading.Thread:
+        """Read and gzip these files on a thread now: their first request finds them ready.
+
+        Pyodide's runtime: the first student to open the Code panel gets it gzipped too.
+        """
+        def read_all() -> None:
+            for relative in relatives:
+                self._asset(f"/{relative}", gzip_here=True)
+
+        thread = threading.Thread(target=read_all, daemon=True, name="warm files")
+        thread.start()
+        return thread
+
+    def _asset(self, url_path: str, gzip_here: bool = False) -> _Asset | None:
+        """The published file ``url_path`` names, reread when changed (inode, mtime, size).
+
+        ``gzip_here``: compress a large file on the calling thread (not the event loop's).
+        """
         opened = openpublished(self._web_dir, url_path)
         if opened is None:
             return None
@@ -515,7 +531,7 @@ class HttpServer:
                                                          f"script-src 'self' {script}")
         gzipped = None
         compress = suffix in COMPRESSIBLE and len(body) >= GZIP_MIN_BYTES
-        if compress and len(body) <= LOOP_GZIP_MAX_BYTES:
+        if compress and (gzip_here or len(body) <= LOOP_GZIP_MAX_BYTES):
             gzipped = _gzipped(body)
         asset = _Asset(key, body, gzipped, CONTENT_TYPES[suffix],
                        f"{info.st_mtime_ns:x}-{info.st_size:x}", policy)
@@ -629,4 +645,6 @@ async def start_http(host: str, port: int, directory: Path,
         with contextlib.suppress(Exception):
             await server.close()
         raise
+    if code is not None:
+        server.warm(PYODIDE_FILES)
     return server
