@@ -59,12 +59,15 @@ def code_context(browser: Any, http_url: str, ws_url: str, **options: Any) -> It
     context = browser.new_context(bypass_csp=False, accept_downloads=True, **options)
     guard = OriginGuard(allowed)
     context.route("**/*", guard.route)
+    sockets: list[str] = []  # WebSockets pass no route: noted as the pages open them
+    context.on("page", lambda page: page.on("websocket", lambda ws: sockets.append(ws.url)))
     context.guard = guard
     try:
         yield context
     finally:
         context.close()
     assert guard.refused == [], f"requests to other hosts: {guard.refused}"
+    assert all(urlsplit(url).netloc in allowed for url in sockets), sockets
 
 
 def open_code(page: Any, url: str) -> None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import _thread
 import importlib.util
 import json
+import os
 import queue
 import shutil
 import subprocess
@@ -336,3 +337,41 @@ def test_timers_run_while_the_program_waits(loop: Any) -> None:
 def test_a_negative_sleep_is_refused_as_cpython_refuses_it(loop: Any) -> None:
     with pytest.raises(ValueError, match="non-negative"):
         time.sleep(-1)
+
+
+def run_for(command: list[str], seconds: float, env: dict[str, str],
+            cwd: Path) -> tuple[str, str]:
+    """Run a program that runs until stopped for ``seconds``, then stop it; its output."""
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, env={**os.environ, **env}, cwd=cwd)
+    try:
+        out, err = process.communicate(timeout=seconds)
+    except subprocess.TimeoutExpired:
+        process.terminate()
+        out, err = process.communicate(timeout=10)
+    return out, err
+
+
+def test_every_starter_runs_as_it_is_with_roslibpy_and_roslib(
+        server: ServerProcess, tmp_path: Path) -> None:
+    """The starters the panel offers are programs that run (made from the scenario files)."""
+    from websim.code_starters import assignments
+    found = assignments()
+    assert {a["name"] for a in found} == {path.stem for path in
+                                          (ROOT / "examples" / "scenarios").glob("*.yaml")}
+    node = shutil.which("node")
+    for assignment in found:
+        env = {"WEBSIM_URL": server.ws_url, **assignment["scenarios"][0]["env"]}
+        python = tmp_path / f"{assignment['name']}.py"
+        python.write_text(assignment["starters"]["python"])
+        for command in ([sys.executable, str(python)],
+                        [sys.executable, str(RUNNER), str(python)]):
+            out, err = run_for(command, 3.0, env, tmp_path)
+            assert out.startswith("connected") and "Traceback" not in err, (command, out, err)
+        if node is not None:
+            script = tmp_path / f"{assignment['name']}.js"
+            script.write_text(assignment["starters"]["javascript"])
+            out, err = run_for([node, str(script)], 3.0,
+                               {**env, "NODE_PATH": str(ROOT / "web-interface" /
+                                                        "node_modules")}, tmp_path)
+            assert out.startswith("connected") and "Error" not in err, (out, err)

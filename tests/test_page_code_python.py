@@ -119,6 +119,24 @@ def test_a_p_controller_typed_in_python_turns_the_robot_to_its_setpoint(
     assert twist_pairs(bridge.messages("/cmd_vel"))[-1] == (0.0, 0.0)
 
 
+def test_the_editor_works_from_the_keyboard_and_its_keys_do_not_drive_the_robot(
+        page: Any, bridge: Bridge) -> None:
+    reset_robot(bridge)
+    type_program(page, "")
+    commands = len(bridge.messages("/cmd_vel"))
+    page.keyboard.type("def total(a, b):\nreturn a + b\n")  # Enter indents the body
+    page.keyboard.press("Shift+Tab")  # back out of the body
+    page.keyboard.type('print("sum", total(2, 3')  # the closing quote and brackets: put there
+    page.keyboard.press("ArrowUp")  # in the editor: the cursor, not the robot
+    page.keyboard.press("ArrowDown")
+    assert editor_text(page) == 'def total(a, b):\n    return a + b\nprint("sum", total(2, 3))'
+    page.keyboard.press("Control+Enter")  # Run
+    wait_output(page, "sum 5", timeout_s=60)
+    time.sleep(0.5)
+    # the arrows drove nothing (the zeros: Run stands the page's teleop down, the end stops)
+    assert set(twist_pairs(bridge.messages("/cmd_vel")[commands:])) <= {(0.0, 0.0)}
+
+
 def test_an_exception_is_shown_with_its_line_in_the_output_and_the_editor(page: Any) -> None:
     set_language(page, "python")
     type_program(page, 'import time\nprint("before")\n\n\ndef speed(distance_m):\n'

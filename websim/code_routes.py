@@ -271,7 +271,10 @@ class CodeRoutes:
         roslib in ``NAME/node_modules``).
         """
         assert self.state is not None
-        modules = None if self.web_dir is None else self.web_dir / "node_modules"
+        modules = None  # JavaScript folders get roslib where the server has its Node package
+        if self.web_dir is not None and \
+                self.queue.grader.language_unavailable("javascript") is None:
+            modules = self.web_dir / "node_modules"
         buffer = io.BytesIO()
         with tempfile.TemporaryDirectory(prefix="websim-export-") as folder, \
                 zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
@@ -279,9 +282,7 @@ class CodeRoutes:
             for name, code in self.state.newest_code().items():
                 if not ROBOT_NAME.fullmatch(name) or code["language"] not in LANGUAGES:
                     continue
-                write_submission(root / name, code["language"], code["text"],
-                                 modules if modules is not None and (modules / "roslib").is_dir()
-                                 else None)
+                write_submission(root / name, code["language"], code["text"], modules)
             for path in sorted(root.rglob("*")):
                 if path.is_file():
                     archive.write(path, path.relative_to(root).as_posix())

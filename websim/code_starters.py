@@ -15,6 +15,7 @@ grade`` sets it, and the page when it runs them).
 from __future__ import annotations
 
 import json
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -101,6 +102,10 @@ def _topic_line(topic: TopicSpec) -> str:
     return f"{topic.name:<10} {topic.type:<28} {way}{rate}: {topic.description}"
 
 
+WIDTH = 88
+"""The starters' prose is wrapped to this many characters (a student's editor, a laptop's)."""
+
+
 def _told(facts: dict[str, Any], comment: str) -> list[str]:
     """The header lines both starters share (without comment markers)."""
     scenarios = facts["scenarios"]
@@ -117,7 +122,12 @@ def _told(facts: dict[str, Any], comment: str) -> list[str]:
     lines += ["", f"Graded by: {', '.join(facts['metrics'])}. Submit runs websim grade "
               f"{facts['name']} in deterministic mode: after each /odom the simulator waits "
               "for one /cmd_vel, so answer every /odom with one.", ""]
-    return [f"{comment}{line}".rstrip() for line in lines]
+    wrapped = []
+    for line in lines:
+        indent = " " * (len(line) - len(line.lstrip()))
+        wrapped += textwrap.wrap(line, WIDTH - len(comment), subsequent_indent=indent + "  "
+                                 if indent else "", break_on_hyphens=False) or [""]
+    return [f"{comment}{line}".rstrip() for line in wrapped]
 
 
 def python_starter(facts: dict[str, Any]) -> str:

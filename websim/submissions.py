@@ -162,8 +162,11 @@ class Grader:
         if language == "javascript":
             if self.node is None:
                 return "Node is not installed on this server, so JavaScript is not graded here"
-            if not (self.roslib_modules / "roslib").is_dir():
-                return "roslib is not installed on this server (npm ci in web-interface/)"
+            if not (self.roslib_modules / "roslib" / "package.json").is_file() or \
+                    not (self.roslib_modules / ".package-lock.json").is_file():
+                return ("roslib's Node package is not installed on this server (a checkout "
+                        "after npm ci in web-interface/ has it; an installed wheel carries "
+                        "only the page's build of it), so JavaScript is not graded here")
         return None
 
     def time_limit_s(self, assignment: str) -> float:

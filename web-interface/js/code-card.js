@@ -42,7 +42,9 @@ export function bindCodeCard(elements, { connection, robot, stopRobot, onRun,
     } catch (error) {
       elements.open.disabled = false;
       elements.open.textContent = 'Open the editor';
-      elements.state.textContent = `the editor could not load: ${error.message}`;
+      elements.state.textContent = /specifier/.test(error.message)
+        ? 'the editor needs websim serve: this server gave the page no import map for it'
+        : `the editor could not load: ${error.message}`;
       elements.state.dataset.state = 'failed';
       throw error;
     }
