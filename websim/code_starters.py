@@ -130,16 +130,22 @@ def _told(facts: dict[str, Any], comment: str) -> list[str]:
     return [f"{comment}{line}".rstrip() for line in wrapped]
 
 
+def _constants(facts: dict[str, Any]) -> list[tuple[str, str, str, bool]]:
+    """Each WEBSIM_* a starter reads.
+
+    As (its name in the program, the variable, the first scenario's value, whether it is a
+    number).
+    """
+    return [(variable.removeprefix("WEBSIM_"), variable, values[0],
+             _is_number(values[0]) and not variable.endswith("_CHANGES"))
+            for variable, values in _variables(facts["scenarios"]).items()]
+
+
 def python_starter(facts: dict[str, Any]) -> str:
     """A roslibpy controller that runs as it is and says where the control goes."""
-    variables = _variables(facts["scenarios"])
-    constants = []
-    for variable, values in variables.items():
-        name = variable.removeprefix("WEBSIM_")
-        if _is_number(values[0]) and not variable.endswith("_CHANGES"):
-            constants.append(f'{name} = float(os.environ.get("{variable}", "{values[0]}"))')
-        else:
-            constants.append(f'{name} = os.environ.get("{variable}", {json.dumps(values[0])})')
+    constants = [f'{name} = float(os.environ.get("{variable}", "{value}"))' if number else
+                 f'{name} = os.environ.get("{variable}", {json.dumps(value)})'
+                 for name, variable, value, number in _constants(facts)]
     header = "\n".join(_told(facts, ""))
     return f'''"""{header}
 Run on a laptop: pip install roslibpy, then WEBSIM_URL=ws://HOST:9090 python3 {facts['name']}.py
@@ -181,16 +187,9 @@ while ros.is_connected:
 
 def javascript_starter(facts: dict[str, Any]) -> str:
     """A roslib 1.4.1 controller that runs as it is and says where the control goes."""
-    variables = _variables(facts["scenarios"])
-    constants = []
-    for variable, values in variables.items():
-        name = variable.removeprefix("WEBSIM_")
-        if _is_number(values[0]) and not variable.endswith("_CHANGES"):
-            constants.append(f"const {name} = Number(process.env.{variable} || "
-                             f"'{values[0]}');")
-        else:
-            constants.append(f"const {name} = process.env.{variable} || "
-                             f"{json.dumps(values[0])};")
+    constants = [f"const {name} = Number(process.env.{variable} || '{value}');" if number else
+                 f"const {name} = process.env.{variable} || {json.dumps(value)};"
+                 for name, variable, value, number in _constants(facts)]
     header = "\n".join(_told(facts, "// "))
     return f"""{header}
 // Run on a laptop: npm install roslib@1.4.1, then WEBSIM_URL=ws://HOST:9090 node {facts['name']}.js
