@@ -199,6 +199,19 @@ def test_an_endless_loop_leaves_the_page_responsive_and_stop_ends_it_and_stops_t
     assert twist_pairs(bridge.messages("/cmd_vel"))[-1] == (0.0, 0.0)
 
 
+def test_restart_ends_a_program_stuck_in_a_loop_and_runs_it_again(page: Any) -> None:
+    type_program(page, 'import time\nprint("started at", time.time())\nwhile True:\n'
+                       '    pass\n')
+    run_program(page)
+    wait_output(page, "started at", timeout_s=60)
+    page.click("#code-restart")
+    wait_for(lambda: output(page).count("started at") == 2, timeout_s=30,
+             what="the program to start again")
+    assert state(page) == "running"
+    page.click("#code-stop")
+    assert wait_state(page, ("stopped",), timeout_s=10) == "stopped"
+
+
 def test_a_print_flood_keeps_the_newest_lines_and_the_page_usable(page: Any) -> None:
     type_program(page, 'i = 0\nwhile True:\n    print("line", i)\n    i += 1\n')
     run_program(page)

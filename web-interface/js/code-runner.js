@@ -62,12 +62,17 @@ export class ProgramRunner extends EventTarget {
 
   /** Runs a program: {language, source, filename, env}; stops the one running first. */
   async run({ language, source, filename, env }) {
-    if (this.run_) this.stop();
+    const previous = this.run_;
+    if (previous) { // Restart: the old program must be over (its worker may be ended)
+      this.stop();
+      await previous.done;
+    }
     const outputShared = new SharedArrayBuffer(8);
     const run = {
       language, sockets: new Map(), pending: [], pendingBytes: 0, dropped: 0, ended: false,
       startedMs: performance.now(), outputShared, output: new Int32Array(outputShared),
     };
+    run.done = new Promise((resolve) => { run.resolveDone = resolve; });
     this.run_ = run;
     this.language = language;
     if (language === 'python') {
@@ -283,6 +288,7 @@ export class ProgramRunner extends EventTarget {
     };
     this._setState(status, detail);
     this.dispatchEvent(new CustomEvent('ended', { detail }));
+    run.resolveDone();
   }
 
   _setState(state, detail = null) {
