@@ -24,6 +24,7 @@ from setuptools.command.build_py import build_py
 ROOT = Path(__file__).resolve().parent
 WEB_DIR = ROOT / "web-interface"
 WEB_FILES = runpy.run_path(str(ROOT / "websim" / "web_files.py"))
+EXAMPLES = ("course_snippets.py", "course_snippets.js")
 
 
 def vendor_libraries() -> None:
@@ -45,7 +46,8 @@ class BuildWithShippedFiles(build_py):
     """``build_py``, then the shipped files into ``physics/_share`` and ``websim/_share``.
 
     ``physics/_share``: the robot parameters, the worlds, the command files of
-    ``websim compare`` and the scenarios of ``grading``; ``websim/_share``: the page.
+    ``websim compare``, the scenarios of ``grading`` and the course's snippets (the Code
+    panel's examples); ``websim/_share``: the page.
     """
 
     def run(self) -> None:
@@ -60,6 +62,8 @@ class BuildWithShippedFiles(build_py):
             target.mkdir(parents=True, exist_ok=True)
             for source in sorted((ROOT / folder).glob("*.yaml")):
                 shutil.copy2(source, target / source.name)
+        for example in EXAMPLES:  # the Code panel's examples (websim.code_starters)
+            shutil.copy2(ROOT / "examples" / example, build / "physics" / "_share" / "examples")
         web_target = build / "websim" / "_share" / "web-interface"
         for relative in WEB_FILES["published_files"](WEB_DIR):
             destination = web_target / relative

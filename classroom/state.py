@@ -21,6 +21,10 @@ claimed, seen_s) and ``robots`` (name, JSON state from ``registry.robot_state``)
 that keeps more adds a table of its own (older websims ignore it) or a key of
 ``robot_state``.
 
+Besides, each student's program as the Code panel saved it (a few recent versions per
+language, ``save_code``) and their last submission with its reports (``save_submission``),
+written when they change (tables ``code``, ``submissions`` and ``reports``).
+
 The file is held for the server's life (``locking_mode=EXCLUSIVE``): a second server on the
 same file is refused. A file of another class, of a newer schema, locked or corrupt is
 refused with the reason (``ConfigError``), never overwritten: ``--fresh`` starts over.
@@ -66,7 +70,21 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS enrolments (
     name TEXT PRIMARY KEY, claimed INTEGER NOT NULL DEFAULT 0, seen_s REAL NOT NULL DEFAULT 0);
 CREATE TABLE IF NOT EXISTS robots (name TEXT PRIMARY KEY, state TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS code (
+    name TEXT NOT NULL, version INTEGER NOT NULL, language TEXT NOT NULL,
+    saved_at REAL NOT NULL, reason TEXT NOT NULL, text TEXT NOT NULL,
+    PRIMARY KEY (name, version));
+CREATE TABLE IF NOT EXISTS submissions (name TEXT PRIMARY KEY, submission TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS reports (
+    name TEXT NOT NULL, scenario TEXT NOT NULL, html TEXT NOT NULL,
+    PRIMARY KEY (name, scenario));
 """
+
+TABLES = ("meta", "enrolments", "robots", "code", "submissions", "reports")
+
+AUTOSAVE = "autosave"
+"""A save the page makes by itself while the student types: it replaces the newest version
+if that was one too, so typing does not push the versions a student asked for out."""
 
 
 def default_state_path(class_spec: str, worker_port: int | None = None,
@@ -148,7 +166,7 @@ class ClassState:
                 if saved is not None and now_s - float(saved) > stale_after_s:
                     fresh, self.stale_s = True, now_s - float(saved)
             if fresh:
-                for table in ("meta", "enrolments", "robots"):
+                for table in TABLES:
                     self._db.execute(f"DROP TABLE IF EXISTS {table}")
             for statement in filter(str.strip, _SCHEMA.split(";")):
                 self._db.execute(statement)
@@ -289,6 +307,93 @@ class ClassState:
             self._db.execute("INSERT INTO meta VALUES ('saved_s', ?) ON CONFLICT(key) DO "
                              "UPDATE SET value = excluded.value", (repr(now_s),))
         self.saved_s = now_s
+
+    def code_versions(self, name: str) -> list[dict[str, Any]]:
+        """A student's saved programs, the newest first.
+
+        Each: version, language, saved_at (s since the epoch), reason (``autosave``, ``run``,
+        ``submit``...) and text.
+        """
+        rows = self._db.execute("SELECT version, language, saved_at, reason, text FROM code "
+                                "WHERE name = ? ORDER BY version DESC", (name,))
+        return [{"version": version, "language": language, "saved_at": saved_at,
+                 "reason": reason, "text": text}
+                for version, language, saved_at, reason, text in rows]
+
+    def save_code(self, name: str, language: str, text: str, reason: str, saved_at: float,
+                  keep: int) -> int:
+        """Save a student's program; its version number.
+
+        The same text as the newest version of its language only updates that version's time;
+        an autosave replaces a newest version that was an autosave; anything else is a new
+        version. Of each language the ``keep`` newest versions stay.
+        """
+        with self._db:
+            self._db.execute("BEGIN")
+            newest = self._db.execute(
+                "SELECT version, reason, text FROM code WHERE name = ? AND language = ? "
+                "ORDER BY version DESC LIMIT 1", (name, language)).fetchone()
+            if newest is not None and (newest[2] == text or (
+                    reason == AUTOSAVE and newest[1] == AUTOSAVE)):
+                version = int(newest[0])
+                kept_reason = newest[1] if newest[2] == text and reason == AUTOSAVE else reason
+                self._db.execute("UPDATE code SET saved_at = ?, reason = ?, text = ? WHERE "
+                                 "name = ? AND version = ?",
+                                 (saved_at, kept_reason, text, name, version))
+                return version
+            last = self._db.execute("SELECT MAX(version) FROM code WHERE name = ?",
+                                    (name,)).fetchone()[0]
+            version = int(last or 0) + 1
+            self._db.execute("INSERT INTO code VALUES (?, ?, ?, ?, ?, ?)",
+                             (name, version, language, saved_at, reason, text))
+            self._db.execute("DELETE FROM code WHERE name = ? AND language = ? AND version "
+                             "NOT IN (SELECT version FROM code WHERE name = ? AND language = ? "
+                             "ORDER BY version DESC LIMIT ?)",
+                             (name, language, name, language, keep))
+            return version
+
+    def newest_code(self) -> dict[str, dict[str, Any]]:
+        """Every student's newest saved program (of any language), by name."""
+        rows = self._db.execute(
+            "SELECT name, version, language, saved_at, reason, text FROM code c WHERE version "
+            "= (SELECT MAX(version) FROM code WHERE name = c.name) ORDER BY name")
+        return {name: {"version": version, "language": language, "saved_at": saved_at,
+                       "reason": reason, "text": text}
+                for name, version, language, saved_at, reason, text in rows}
+
+    def submission(self, name: str) -> dict[str, Any] | None:
+        """A student's last submission (as ``save_submission`` kept it), or None."""
+        row = self._db.execute("SELECT submission FROM submissions WHERE name = ?",
+                               (name,)).fetchone()
+        return None if row is None else dict(json.loads(row[0]))
+
+    def submissions(self) -> dict[str, dict[str, Any]]:
+        """Every student's last submission, by name."""
+        return {name: json.loads(text) for name, text in
+                self._db.execute("SELECT name, submission FROM submissions ORDER BY name")}
+
+    def save_submission(self, name: str, submission: Mapping[str, Any],
+                        reports: Mapping[str, str] | None = None) -> None:
+        """Keep a student's last submission.
+
+        With ``reports`` (scenario: report.html), those replace the previous submission's.
+        """
+        with self._db:
+            self._db.execute("BEGIN")
+            self._db.execute("INSERT INTO submissions VALUES (?, ?) ON CONFLICT(name) DO "
+                             "UPDATE SET submission = excluded.submission",
+                             (name, json.dumps(submission)))
+            if reports is not None:
+                self._db.execute("DELETE FROM reports WHERE name = ?", (name,))
+                self._db.executemany("INSERT INTO reports VALUES (?, ?, ?)",
+                                     [(name, scenario, html)
+                                      for scenario, html in reports.items()])
+
+    def report(self, name: str, scenario: str) -> str | None:
+        """The report.html of a student's last submission for ``scenario``, or None."""
+        row = self._db.execute("SELECT html FROM reports WHERE name = ? AND scenario = ?",
+                               (name, scenario)).fetchone()
+        return None if row is None else str(row[0])
 
     def close(self) -> None:
         """Checkpoint and release the file."""

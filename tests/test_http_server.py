@@ -31,6 +31,7 @@ import pytest
 from websockets.asyncio.client import connect
 
 from websim.http_server import IDLE_TIMEOUT_S, ConnectionTable, connection_cap
+from websim.import_map import with_import_map
 from websim.serve import WEB_DIR
 
 from server_process import ADMIN_TOKEN, ServerProcess, free_port, start_server, wait_for
@@ -47,7 +48,9 @@ FETCHED_BY_SCRIPTS = ("/config.json", "/robot.json")
 """Loaded with fetch() by the pages' modules, not named in a way REFERENCE finds."""
 
 EXPECTED_TYPES = {".html": "text/html", ".js": "text/javascript", ".mjs": "text/javascript",
-                  ".css": "text/css", ".json": "application/json", ".svg": "image/svg+xml"}
+                  ".css": "text/css", ".json": "application/json", ".svg": "image/svg+xml",
+                  ".py": "text/x-python", ".wasm": "application/wasm",
+                  ".zip": "application/zip"}
 
 
 def request(server: ServerProcess, path: str, method: str = "GET",
@@ -83,6 +86,11 @@ def crawl(server: ServerProcess, start: tuple[str, ...] = ("/", "/admin")) -> se
     return seen
 
 
+def served_page() -> bytes:
+    """index.html as the server answers it: its import map written in."""
+    return with_import_map((WEB_DIR / "index.html").read_bytes(), WEB_DIR)[0]
+
+
 def file_of(path: str) -> Path:
     return WEB_DIR / {"/": "index.html", "/admin": "admin.html"}.get(path, path.lstrip("/"))
 
@@ -96,7 +104,10 @@ def test_every_file_the_pages_load_is_served_with_its_type_and_no_cache(
             "/favicon.svg", "/css/style.css", "/js/main.js", "/js/admin.js"} <= loaded
     for path in sorted(loaded - {"/robot.json", "/config.json"}):  # those two: filled live
         status, headers, body = request(server, path)
-        assert (status, body) == (200, file_of(path).read_bytes()), path
+        expected = file_of(path).read_bytes()
+        if file_of(path).suffix == ".html":  # the page as served: its import map written in
+            expected = with_import_map(expected, WEB_DIR)[0]
+        assert (status, body) == (200, expected), path
         suffix = file_of(path).suffix
         assert headers["Content-Type"].startswith(EXPECTED_TYPES[suffix]), path
         assert headers["Cache-Control"] == "no-cache", path
@@ -224,13 +235,13 @@ def test_unchanged_files_revalidate_and_text_is_gzipped(server: ServerProcess) -
 def test_only_get_and_head_are_answered(server: ServerProcess) -> None:
     status, headers, body = request(server, "/", method="HEAD")
     assert status == 200 and body == b""
-    assert int(headers["Content-Length"]) == (WEB_DIR / "index.html").stat().st_size
+    assert int(headers["Content-Length"]) == len(served_page())
     status, headers, _ = request(server, "/", method="POST")
     assert status == 405 and headers["Allow"] == "GET, HEAD"
 
 
 def test_forty_simultaneous_page_loads_all_succeed(server: ServerProcess) -> None:
-    page = (WEB_DIR / "index.html").read_bytes()
+    page = served_page()
     start = threading.Barrier(40)
     results: list[tuple[int, bytes] | BaseException] = []
 
@@ -292,7 +303,7 @@ def test_a_thousand_half_open_connections_do_not_lock_out_a_browser(
             sock.sendall(b"GET /index.ht")
             stalled.append(sock)
         status, _, body = request(limited, "/")
-        assert (status, body) == (200, (WEB_DIR / "index.html").read_bytes())
+        assert (status, body) == (200, served_page())
         held = sum(not closed_by_server(sock, 0) for sock in stalled)
         assert 0 < held <= connection_cap(1024), "the oldest stalled ones made room"
         assert limited.health()["status"] == "ok"

@@ -31,12 +31,14 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import gzip
 import html
 import json
 import logging
 import os
 import stat
+import threading
 from collections import OrderedDict
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -49,14 +51,17 @@ from aiohttp.abc import AbstractAccessLogger
 
 from ros_nodes.robot_interface import ROBOTS_PREFIX
 from rosbridge.core.limits import ClientLimits, TrustedProxies, budget_key
-from websim.web_files import CONTENT_TYPES, published
+from websim.import_map import with_import_map
+from websim.web_files import CONTENT_TYPES, PYODIDE_FILES, published
 
 log = logging.getLogger("websim.http")
 
-PAGE_ROUTES = {"/": "index.html", "/admin": "admin.html", "/class": "class.html"}
+PAGE_ROUTES = {"/": "index.html", "/admin": "admin.html", "/class": "class.html",
+               "/submissions": "submissions.html"}
 """Clean URLs the course uses, mapped to files of the web folder."""
 
-COMPRESSIBLE = frozenset({".html", ".js", ".mjs", ".css", ".json", ".map", ".svg"})
+COMPRESSIBLE = frozenset({".html", ".js", ".mjs", ".css", ".json", ".map", ".svg", ".py",
+                          ".wasm"})
 
 GZIP_MIN_BYTES = 1024
 """Smaller files are sent as they are: the gzip header and a round of inflating cost more."""
@@ -85,8 +90,30 @@ SECURITY_HEADERS = {
     "Content-Security-Policy": CONTENT_SECURITY_POLICY,
     "X-Frame-Options": "DENY",
     "Referrer-Policy": "no-referrer",
+    "Cross-Origin-Opener-Policy": "same-origin",
+    "Cross-Origin-Embedder-Policy": "require-corp",
+    "Cross-Origin-Resource-Policy": "same-origin",
 }
-"""On every answer: the admin pages carry the token in their URL, which no Referer may leak."""
+"""On every answer: the admin pages carry the token in their URL, which no Referer may leak.
+The three Cross-Origin headers make the pages cross-origin isolated, which SharedArrayBuffer
+needs (the Code panel's Python worker reads its frames from one, and Pyodide's interrupt is
+one); everything the pages load is this server's own, so nothing else changes."""
+
+WORKER_POLICIES = {
+    "js/code-python-worker.js": (
+        "default-src 'self'; script-src 'self' 'unsafe-eval' 'wasm-unsafe-eval'; "
+        "connect-src 'self'; object-src 'none'; base-uri 'none'"),
+    "js/code-js-worker.js": (
+        "default-src 'self'; script-src 'self' blob:; connect-src 'self' ws: wss:; "
+        "object-src 'none'; base-uri 'none'"),
+}
+"""The Code panel's workers' own policies (a worker follows the one it is served with, not its
+page's): Pyodide compiles WebAssembly and its glue calls eval(); a JavaScript program is
+loaded from a blob: URL and opens its robot's WebSocket. The page's policy stays as it is."""
+
+LOOP_GZIP_MAX_BYTES = 1 << 20
+"""A larger file is gzipped on a thread, not on the event loop (Pyodide's 9.6 MB interpreter
+takes ~0.5 s: every robot's tick would wait); it is sent as it is until that is done."""
 
 LISTEN_BACKLOG = 1024
 """Connections the kernel queues before they are accepted: 40 browsers opening 6 each at
@@ -361,16 +388,19 @@ class _Asset:
     gzipped: bytes | None
     content_type: str
     etag: str
+    policy: str | None = None  # its own Content-Security-Policy, if not the pages'
 
 
 class HttpServer:
     """The web interface's HTTP server; ``start_http`` starts one, ``close()`` stops it."""
 
     def __init__(self, web_dir: Path, health: Callable[[str | None], dict[str, Any]],
-                 live: LiveDocuments, connections: ConnectionTable) -> None:
+                 live: LiveDocuments, connections: ConnectionTable,
+                 code: CodeRoutes | None = None) -> None:
         self._web_dir = os.path.realpath(web_dir)
         self._health = health
         self._live = live
+        self._code = code
         self._assets: dict[str, _Asset] = {}  # by real path in the web folder
         self.connections = connections
         protocol_log = _ClientFaultLogger("websim.http.protocol")
@@ -403,13 +433,17 @@ class HttpServer:
         self.connections.begin(connection)
         try:
             try:
-                response = self._respond(request)
+                if self._code is not None and self._code.handles(request.path):
+                    response = await self._code.respond(request)
+                else:
+                    response = self._respond(request)
             except Exception:
                 log.exception("HTTP %s %s failed", request.method, request.path)
                 response = web.Response(status=500, text="500: Internal Server Error")
             response.headers.setdefault("Cache-Control", CACHE_CONTROL)
             response.headers["X-Content-Type-Options"] = "nosniff"
-            response.headers.update(SECURITY_HEADERS)
+            for name, value in SECURITY_HEADERS.items():  # unless the answer set its own
+                response.headers.setdefault(name, value)
             response.headers["Server"] = "websim"  # not aiohttp's and Python's versions
             await response.prepare(request)
             await response.write_eof()
@@ -450,6 +484,8 @@ class HttpServer:
             "Accept-Encoding", "")
         etag = f'"{asset.etag}-gz"' if gzipped else f'"{asset.etag}"'
         headers = {"ETag": etag, "Content-Type": asset.content_type}
+        if asset.policy is not None:
+            headers["Content-Security-Policy"] = asset.policy
         if asset.gzipped is not None:
             headers["Vary"] = "Accept-Encoding"
         if etag in _etags(request.headers.get("If-None-Match", "")):
@@ -458,8 +494,24 @@ class HttpServer:
             headers["Content-Encoding"] = "gzip"
         return web.Response(body=asset.gzipped if gzipped else asset.body, headers=headers)
 
-    def _asset(self, url_path: str) -> _Asset | None:
-        """The published file ``url_path`` names, reread when changed (inode, mtime, size)."""
+    def warm(self, relatives: tuple[str, ...]) -> threading.Thread:
+        """Read and gzip these files on a thread now: their first request finds them ready.
+
+        Pyodide's runtime: the first student to open the Code panel gets it gzipped too.
+        """
+        def read_all() -> None:
+            for relative in relatives:
+                self._asset(f"/{relative}", gzip_here=True)
+
+        thread = threading.Thread(target=read_all, daemon=True, name="warm files")
+        thread.start()
+        return thread
+
+    def _asset(self, url_path: str, gzip_here: bool = False) -> _Asset | None:
+        """The published file ``url_path`` names, reread when changed (inode, mtime, size).
+
+        ``gzip_here``: compress a large file on the calling thread (not the event loop's).
+        """
         opened = openpublished(self._web_dir, url_path)
         if opened is None:
             return None
@@ -475,14 +527,35 @@ class HttpServer:
         except OSError:
             return None
         suffix = os.path.splitext(relative)[1]
+        policy = WORKER_POLICIES.get(relative)
+        if suffix == ".html":
+            body, script = with_import_map(body, Path(self._web_dir))
+            if script is not None:
+                policy = CONTENT_SECURITY_POLICY.replace("script-src 'self'",
+                                                         f"script-src 'self' {script}")
         gzipped = None
-        if suffix in COMPRESSIBLE and len(body) >= GZIP_MIN_BYTES:
-            packed = gzip.compress(body, compresslevel=GZIP_LEVEL, mtime=0)
-            gzipped = packed if len(packed) < len(body) else None
+        compress = suffix in COMPRESSIBLE and len(body) >= GZIP_MIN_BYTES
+        if compress and (gzip_here or len(body) <= LOOP_GZIP_MAX_BYTES):
+            gzipped = _gzipped(body)
         asset = _Asset(key, body, gzipped, CONTENT_TYPES[suffix],
-                       f"{info.st_mtime_ns:x}-{info.st_size:x}")
+                       f"{info.st_mtime_ns:x}-{info.st_size:x}", policy)
         self._assets[relative] = asset
+        if compress and gzipped is None and len(body) > LOOP_GZIP_MAX_BYTES:
+            threading.Thread(target=self._gzip_later, args=(relative, asset), daemon=True,
+                             name=f"gzip {relative}").start()
         return asset
+
+    def _gzip_later(self, relative: str, asset: _Asset) -> None:
+        """Gzip a large file on this thread; cached unless the file changed meanwhile."""
+        gzipped = _gzipped(asset.body)
+        if gzipped is not None and self._assets.get(relative) is asset:
+            self._assets[relative] = dataclasses.replace(asset, gzipped=gzipped)
+
+
+def _gzipped(body: bytes) -> bytes | None:
+    """``body`` gzipped, or None when that is no smaller."""
+    packed = gzip.compress(body, compresslevel=GZIP_LEVEL, mtime=0)
+    return packed if len(packed) < len(body) else None
 
 
 def not_a_robot_page(reason: str) -> web.Response:
@@ -514,6 +587,16 @@ def _etags(header: str) -> list[str]:
     return [tag.strip().removeprefix("W/") for tag in header.split(",")]
 
 
+class CodeRoutes(Protocol):
+    """The Code panel's routes: saving, submitting and the instructor's view of them."""
+
+    def handles(self, path: str) -> bool:
+        """Whether ``path`` is one of its routes (any method)."""
+
+    async def respond(self, request: web.BaseRequest) -> web.Response:
+        """The answer to a request for one of its routes."""
+
+
 class LiveDocuments(Protocol):
     """The documents the server fills itself, and which robots (``/robots/NAME/``) exist."""
 
@@ -537,7 +620,8 @@ class LiveDocuments(Protocol):
 async def start_http(host: str, port: int, directory: Path,
                      health: Callable[[str | None], dict[str, Any]],
                      live: LiveDocuments, limits: ClientLimits | None = None,
-                     proxies: TrustedProxies | None = None) -> HttpServer:
+                     proxies: TrustedProxies | None = None,
+                     code: CodeRoutes | None = None) -> HttpServer:
     """Serve the web interface on ``host:port`` on the running event loop.
 
     Raises the process's soft open-file limit to the hard one first, and sizes the
@@ -554,6 +638,7 @@ async def start_http(host: str, port: int, directory: Path,
         limits: the client limits (``address_max_connections`` sizes each address's share
             of connections; default: the defaults).
         proxies: the trusted proxies, whose connections are not capped per address.
+        code: the Code panel's routes (saving, submitting); None: none.
 
     Raises:
         OSError: the port cannot be bound (in use, say).
@@ -562,7 +647,7 @@ async def start_http(host: str, port: int, directory: Path,
     address_cap = address_connection_cap(limits or ClientLimits())
     trusted = proxies or TrustedProxies()
     server = HttpServer(directory, health, live,
-                        ConnectionTable(cap, address_cap, trusted.trusts))
+                        ConnectionTable(cap, address_cap, trusted.trusts), code)
     log.debug("HTTP connections capped at %d, %d per address", cap, address_cap)
     try:
         await server.listen(host, port)
@@ -570,4 +655,6 @@ async def start_http(host: str, port: int, directory: Path,
         with contextlib.suppress(Exception):
             await server.close()
         raise
+    if code is not None:
+        server.warm(PYODIDE_FILES)
     return server

@@ -37,9 +37,11 @@ from rosbridge.core.limits import ClientLimits, OriginPolicy, TrustedProxies
 from rosbridge.core.schema import NAME_TOKEN
 from rosbridge.graph.names import RELAY_NODE_NAME
 from rosbridge.transport.front import start_websocket
+from websim.code_routes import code_routes
 from websim.http_server import start_http
 from websim.lan import lan_addresses, qr_lines
 from websim.sites import Site, dashboard_url, public_host, url_name
+from websim.submissions import SubmitLimits
 
 WEB_DIR = shipped("websim", "web-interface")
 """The static frontend."""
@@ -202,6 +204,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the event loop: asyncio (the standard library's, the default) "
                              "or uvloop, if installed (measured: 10 %% less CPU at 500 "
                              "clients, but ticks start later; benchmarks/bench_server.py)")
+    submit = SubmitLimits()
+    parser.add_argument("--grade-jobs", type=_not_negative, default=submit.jobs, metavar="N",
+                        help="the Code panel's Submit: programs graded at once, each by "
+                             "websim grade in its sandbox, at a lower CPU priority than the "
+                             f"robots (default {submit.jobs}; 0 turns Submit off)")
+    parser.add_argument("--grade-per-hour", type=_positive(int), default=submit.per_hour,
+                        metavar="N", help="submissions one student may make in any hour "
+                                          f"(default {submit.per_hour})")
     parser.add_argument("--web-dir", type=Path, default=WEB_DIR, help=argparse.SUPPRESS)
     parser.add_argument("--log-level", default="warning",
                         choices=["debug", "info", "warning", "error"],
@@ -243,6 +253,23 @@ def limits_from(args: argparse.Namespace) -> ClientLimits:
                         address_max_connections=args.max_connections_per_address,
                         address_max_rate=args.max_rate_per_address,
                         robot_handling_share=args.handling_share_per_robot)
+
+
+def _not_negative(text: str) -> int:
+    """An argparse type: a whole number, 0 or more."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected 0 or more, got {value}")
+    return value
+
+
+def submit_limits(args: argparse.Namespace) -> SubmitLimits:
+    """Submit's bounds as the options ask (``--grade-jobs``, ``--grade-per-hour``)."""
+    return SubmitLimits(jobs=getattr(args, "grade_jobs", SubmitLimits.jobs),
+                        per_hour=getattr(args, "grade_per_hour", SubmitLimits.per_hour))
 
 
 def owned_names(args: argparse.Namespace) -> Callable[[str], bool] | None:
@@ -299,10 +326,12 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
         websocket = await start_websocket(server, args.host, args.ws_port)
     except OSError as error:
         return _port_error("WebSocket", args.host, args.ws_port, error)
+    code = code_routes(site.classroom, server.is_admin_token, server.proxies, args.web_dir,
+                       submit_limits(args))
     try:
         http = await start_http(
             args.host, args.http_port, args.web_dir,
-            server.health_for, site, server.limits, server.proxies)
+            server.health_for, site, server.limits, server.proxies, code)
     except OSError as error:
         websocket.close()
         return _port_error("HTTP", args.host, args.http_port, error)
@@ -324,7 +353,7 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
     if site.recorder is not None:
         site.recorder.start()
         site.schedule().pacers.append(site.recorder.caught_up)  # lossless above real time
-    tasks = [asyncio.create_task(server.run_ticks())]
+    tasks = [asyncio.create_task(server.run_ticks()), asyncio.create_task(code.queue.run())]
     if ros is not None:
         tasks.append(asyncio.create_task(_poll_graph(ros)))
 

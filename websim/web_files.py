@@ -18,11 +18,47 @@ TOP_LEVEL_FILES = ("*.html", "favicon.svg", "config.json")
 ``examples/roslibjs_page.html`` says; the Docker image copies ``*.html`` too), the icon and
 the site's settings. ``robot.json`` is not a file here: it is answered live."""
 
-PUBLISHED_TREES = ("css", "js", "node_modules/roslib/build", "node_modules/nipplejs/dist",
-                   "node_modules/uplot/dist")
-"""Folders published with everything below them: the pages' own styles and modules, and the
-built files of the libraries the pages load (``index.html``, ``admin.html``, ``js/vendor.js``),
-not the libraries' sources or package files."""
+PUBLISHED_TREES = ("css", "js", "python", "node_modules/roslib/build",
+                   "node_modules/nipplejs/dist", "node_modules/uplot/dist")
+"""Folders published with everything below them: the pages' own styles and modules, the
+browser's roslibpy (``python/``: the Code panel installs it into Pyodide), and the built files of
+the libraries the pages load (``index.html``, ``admin.html``, ``js/vendor.js``), not the
+libraries' sources or package files."""
+
+PYODIDE_FILES = tuple(f"node_modules/pyodide/{name}" for name in (
+    "pyodide.mjs", "pyodide.asm.mjs", "pyodide.asm.wasm", "python_stdlib.zip",
+    "pyodide-lock.json"))
+"""Python in the browser (the Code panel, ``js/code-python-worker.js``): Pyodide's loader, its
+interpreter and the standard library, fetched only when the panel opens. Not its packages (the
+npm package carries none) nor its consoles and type files."""
+
+EDITOR_FILES = tuple(f"node_modules/{name}" for name in (
+    "codemirror/dist/index.js",
+    "@codemirror/autocomplete/dist/index.js",
+    "@codemirror/commands/dist/index.js",
+    "@codemirror/lang-javascript/dist/index.js",
+    "@codemirror/lang-python/dist/index.js",
+    "@codemirror/language/dist/index.js",
+    "@codemirror/lint/dist/index.js",
+    "@codemirror/search/dist/index.js",
+    "@codemirror/state/dist/index.js",
+    "@codemirror/streamparser/dist/index.js",
+    "@codemirror/view/dist/index.js",
+    "@lezer/common/dist/index.js",
+    "@lezer/highlight/dist/index.js",
+    "@lezer/javascript/dist/index.js",
+    "@lezer/lr/dist/index.js",
+    "@lezer/python/dist/index.js",
+    "@marijn/find-cluster-break/src/index.js",
+    "crelt/index.js",
+    "style-mod/src/style-mod.js",
+    "w3c-keyname/index.js"))
+"""The Code panel's editor, CodeMirror 6: each package's ES module, one file each, which the
+page's import map names (``websim.import_map``, built from the packages' own package.json; a
+test holds the two equal)."""
+
+PUBLISHED_FILES = frozenset(PYODIDE_FILES + EDITOR_FILES)
+"""Single files published below ``node_modules`` besides the trees."""
 
 CONTENT_TYPES = {
     ".html": "text/html; charset=utf-8",
@@ -35,13 +71,17 @@ CONTENT_TYPES = {
     ".png": "image/png",
     ".ico": "image/x-icon",
     ".woff2": "font/woff2",
+    ".wasm": "application/wasm",
+    ".zip": "application/zip",
+    ".py": "text/x-python; charset=utf-8",
 }
 """The only file types published, with their MIME types (not the system's mime.types, which
 differ between machines: module scripts must be a JavaScript type or the browser refuses)."""
 
-SEGMENT = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]*")
+SEGMENT = re.compile(r"@?[A-Za-z0-9_-][A-Za-z0-9._-]*")
 """One path segment of a published file: no dotfile, ``.``, ``..``, empty segment (a
-directory's trailing slash), backslash, NUL or other oddity."""
+directory's trailing slash), backslash, NUL or other oddity; an npm scope (``@codemirror``)
+may start with ``@``."""
 
 
 def published(relative: str) -> bool:
@@ -53,7 +93,8 @@ def published(relative: str) -> bool:
         return False
     if len(segments) == 1:
         return any(fnmatch(relative, pattern) for pattern in TOP_LEVEL_FILES)
-    return any(relative.startswith(tree + "/") for tree in PUBLISHED_TREES)
+    return relative in PUBLISHED_FILES or any(relative.startswith(tree + "/")
+                                              for tree in PUBLISHED_TREES)
 
 
 def published_files(web_dir: Path) -> Iterator[str]:

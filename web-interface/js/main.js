@@ -11,6 +11,7 @@ import { PidPanel } from './pid-panel.js';
 import { Readouts } from './readouts.js';
 import { showYourRobot } from './your-robot.js';
 import { Player } from './player.js';
+import { bindCodeCard } from './code-card.js';
 import {
   $, closeWithPage, createTeleop, createView, keepBridgeOnNavigation, librariesLoaded,
   robotDescription, showFatal, subscribeRobot,
@@ -69,13 +70,31 @@ async function main() {
   teleop.addEventListener('drive', () => pid.stop()); // the student takes over
   teleop.addEventListener('halt', () => pid.stop()); // Space or Stop: nothing drives on
   pid.addEventListener('start', () => teleop.stop());
+  const code = bindCodeCard(codeElements(), { // the Code panel: loads nothing until opened
+    connection, robot, stopRobot: () => teleop.stop(), onRun: () => { pid.stop(); teleop.stop(); },
+  });
   closeWithPage(connection);
   keepBridgeOnNavigation();
   runFrameLoop((now) => view.draw(now), (now) => plots.update(now),
     (now) => headingPlot.update(now),
     (now) => readouts.update(now), (now) => bar.update(now, state));
   connection.connect();
-  window.websim = { connection, robot, state, view, teleop, pid, plots, headingPlot }; // console
+  window.websim = { connection, robot, state, view, teleop, pid, plots, headingPlot, code }; // console
+}
+
+function codeElements() {
+  const ids = {
+    open: 'code-open', intro: 'code-intro', panel: 'code-panel', state: 'code-state',
+    nav: 'code-nav-state', navState: 'code-nav-state', language: 'code-language',
+    assignment: 'code-assignment', scenario: 'code-scenario',
+    scenarioLabel: 'code-scenario-label', load: 'code-load', run: 'code-run', stop: 'code-stop',
+    restart: 'code-restart', download: 'code-download', filename: 'code-filename',
+    submit: 'code-submit', saveStatus: 'code-save-status', laptop: 'code-laptop',
+    laptopText: 'code-laptop-text', laptopCopy: 'code-laptop-copy', editor: 'code-editor',
+    output: 'code-output', clear: 'code-clear', grade: 'code-grade',
+    submitNote: 'code-submit-note',
+  };
+  return Object.fromEntries(Object.entries(ids).map(([key, id]) => [key, $(`#${id}`)]));
 }
 
 /**
