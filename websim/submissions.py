@@ -40,6 +40,10 @@ from websim.sandbox import SandboxUnavailableError, find_tools
 
 log = logging.getLogger("websim.submissions")
 
+GRADED_EXIT_CODES = (0, 1)
+"""``websim grade``'s exit status when it graded the program: 0, every scenario passed; 1, one
+failed (2 is bad input: not graded)."""
+
 LANGUAGES = {"python": ("py", "python3"), "javascript": ("js", "node")}
 """A submission's language: its file's extension and the program that runs it."""
 
@@ -227,7 +231,7 @@ class Grader:
                 raise
             said = b"".join(tail).decode("utf-8", "replace")[-OUTPUT_TAIL_BYTES:]
             summary_file = out / "summary.json"
-            if code != 0 or not summary_file.is_file():
+            if code not in GRADED_EXIT_CODES or not summary_file.is_file():
                 last = said.strip().splitlines()[-1:] or [f"exit status {code}"]
                 raise RefusedError(500, f"websim grade could not grade it: {last[0]}")
             return read_results(out, json.loads(summary_file.read_text()), limits)
