@@ -8,6 +8,10 @@ Two paths compute the same ranges:
   (``Space.bb_query``) and intersects every ray with those shapes at once with numpy. Tests hold
   it equal to the reference to 1e-9 m.
 
+The static shapes are the world's arrays (``physics.geometry.WorldShapes``). Other robots are
+discs at this tick's poses (``discs``: one row ``(x, y, radius)`` each, never the scanning
+robot's own footprint); the reference sees them as their pymunk bodies (``seen_by``).
+
 What a beam reports:
 
 * a hit at ``range_min <= d``: ``d`` (plus Gaussian noise when ``scan_sigma_m > 0``);
@@ -23,13 +27,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 import pymunk
 
+from physics.geometry import WorldShapes
 from physics.params import LidarParams
 from physics.snapshots import LaserScan, Pose2D
 from physics.space import WALLS_ONLY, WorldSpace
@@ -48,15 +53,22 @@ TOO_CLOSE_COURSE_M = 0.0
 """Reported for a hit closer than range_min unless REP 117 values are asked for."""
 
 
+NO_DISCS: FloatArray = np.empty((0, 3))
+"""No other robot: ``discs`` of a robot alone in its world."""
+
+
 class Lidar:
     """Casts the beams of one LiDAR against one world.
 
     Args:
         params: beam layout, limits and mounting.
-        world_space: the world's shapes in pymunk.
+        world_space: the world's shapes in pymunk (its index culls large worlds; the reference
+            path queries it).
+        shapes: the same shapes as arrays (``physics.geometry.world_shapes`` of the world).
     """
 
-    def __init__(self, params: LidarParams, world_space: WorldSpace) -> None:
+    def __init__(self, params: LidarParams, world_space: WorldSpace,
+                 shapes: WorldShapes) -> None:
         self._params = params
         self._world_space = world_space
         beam_angles_rad = params.angle_min_rad + np.arange(
@@ -68,13 +80,12 @@ class Lidar:
         self._directions = (self._beam_cos, self._beam_sin)
         walls = world_space.wall_shapes
         self._wall_index: dict[pymunk.Shape, int] = {s: i for i, s in enumerate(walls)}
-        self._wall_a = np.array([tuple(s.a) for s in walls], dtype=float).reshape(-1, 2)
-        self._wall_b = np.array([tuple(s.b) for s in walls], dtype=float).reshape(-1, 2)
+        self._wall_a = shapes.wall_a
+        self._wall_b = shapes.wall_b
         circles = world_space.circle_shapes
         self._circle_index: dict[pymunk.Shape, int] = {s: i for i, s in enumerate(circles)}
-        self._circle_centre = np.array([tuple(s.offset) for s in circles],
-                                       dtype=float).reshape(-1, 2)
-        self._circle_radius = np.array([s.radius for s in circles], dtype=float)
+        self._circle_centre = shapes.circle_centre
+        self._circle_radius = shapes.circle_radius
         self._all_walls = np.arange(len(walls), dtype=np.intp)
         self._all_circles = np.arange(len(circles), dtype=np.intp)
         self._edge = self._wall_b - self._wall_a
@@ -87,8 +98,7 @@ class Lidar:
                                           np.ones((2 * len(walls), 1))])
         """Which rows move with the laser (a - o and b - o do, e does not)."""
         self._a_cross_e = (a[:, 0] * e[:, 1] - a[:, 1] * e[:, 0])[:, None]
-        self.geometry_key = (params, a.tobytes(), b.tobytes(), self._circle_centre.tobytes(),
-                             self._circle_radius.tobytes())
+        self.geometry_key = (params, *shapes.key())
         """Equal for LiDARs that read the same ranges at the same pose (same beams, mount and
         world shapes): one's ``raw_ranges_many`` serves them all."""
 
@@ -114,10 +124,13 @@ class Lidar:
             self._directions_theta = laser.theta
         return self._directions
 
-    def raw_ranges_reference(self, robot_pose: Pose2D) -> FloatArray:
+    def raw_ranges_reference(self, robot_pose: Pose2D,
+                             query_filter: pymunk.ShapeFilter = WALLS_ONLY) -> FloatArray:
         """Distance to the first shape along each beam, +inf if none within range_max (m).
 
-        One pymunk segment query per beam: the reference the fast path must equal.
+        One pymunk segment query per beam: the reference the fast path must equal. With
+        ``query_filter`` ``physics.space.seen_by(group)`` it sees the other robots' bodies
+        too (where the world last placed them), never robot ``group``'s own.
         """
         laser = self.laser_pose(robot_pose)
         range_max = self._params.range_max_m
@@ -126,16 +139,17 @@ class Lidar:
         query = self._world_space.space.segment_query_first
         for i in range(self._params.num_rays):
             end = (laser.x + range_max * dir_x[i], laser.y + range_max * dir_y[i])
-            hit = query((laser.x, laser.y), end, 0.0, WALLS_ONLY)
+            hit = query((laser.x, laser.y), end, 0.0, query_filter)
             if hit is not None:
                 ranges[i] = hit.alpha * range_max
         return ranges
 
-    def raw_ranges(self, robot_pose: Pose2D) -> FloatArray:
+    def raw_ranges(self, robot_pose: Pose2D, discs: FloatArray = NO_DISCS) -> FloatArray:
         """Distance to the first shape along each beam, +inf if none within range_max (m).
 
         In a world of more than ``CULL_ABOVE_SHAPES`` shapes, culls them with pymunk's spatial
-        index first; then intersects all beams with the remaining walls and circles in numpy.
+        index first; then intersects all beams with the remaining walls and circles in numpy,
+        and with ``discs`` (the other robots: rows of x, y, radius).
         """
         laser = self.laser_pose(robot_pose)
         range_max = self._params.range_max_m
@@ -145,12 +159,29 @@ class Lidar:
         if len(walls):
             ranges = self._hit_walls(laser, dir_x, dir_y, walls)
         if len(circles):
-            hits = self._hit_circles(laser, dir_x, dir_y, circles)
+            hits = self._hit_circles(laser, dir_x, dir_y, self._circle_centre[circles],
+                                     self._circle_radius[circles])
             ranges = hits if ranges is None else np.minimum(ranges, hits)
         if ranges is None:
-            return np.full(self._params.num_rays, np.inf)
+            ranges = np.full(self._params.num_rays, np.inf)
+        if len(discs):
+            ranges = self.add_discs(ranges, robot_pose, discs)
         ranges[ranges > range_max] = np.inf
         return ranges
+
+    def add_discs(self, raw_ranges_m: FloatArray, robot_pose: Pose2D,
+                  discs: FloatArray) -> FloatArray:
+        """``raw_ranges_m`` (of the static world, at ``robot_pose``) with ``discs`` seen too.
+
+        Args:
+            raw_ranges_m: the static world's ranges (m, +inf: nothing).
+            robot_pose: the scanning robot's pose in the map frame.
+            discs: the other robots' footprints, rows of (x, y, radius) (m).
+        """
+        laser = self.laser_pose(robot_pose)
+        dir_x, dir_y = self._world_directions(laser)
+        hits = self._hit_circles(laser, dir_x, dir_y, discs[:, :2], discs[:, 2])
+        return np.minimum(raw_ranges_m, hits)
 
     def _shapes_within(self, laser: Pose2D,
                        range_max: float) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
@@ -211,11 +242,10 @@ class Lidar:
                                np.stack((to_b[:, 1], -to_b[:, 0]), axis=1)])
         return rows, (to_a[:, 0] * edge[:, 1] - to_a[:, 1] * edge[:, 0])[:, None]
 
-    def _hit_circles(self, laser: Pose2D, dir_x: FloatArray, dir_y: FloatArray,
-                     indices: npt.NDArray[np.intp]) -> FloatArray:
+    @staticmethod
+    def _hit_circles(laser: Pose2D, dir_x: FloatArray, dir_y: FloatArray,
+                     centre: FloatArray, radius: FloatArray) -> FloatArray:
         """Ray-disc distances; a laser inside a disc reads 0, as pymunk reports it."""
-        centre = self._circle_centre[indices]
-        radius = self._circle_radius[indices]
         to_c_x = (centre[:, 0] - laser.x)[:, None]
         to_c_y = (centre[:, 1] - laser.y)[:, None]
         along = to_c_x * dir_x + to_c_y * dir_y
@@ -281,7 +311,7 @@ class Lidar:
         if len(self._circle_radius):
             for row, laser in enumerate(lasers):
                 ranges[row] = np.minimum(ranges[row], self._hit_circles(
-                    laser, dir_x[row], dir_y[row], self._all_circles))
+                    laser, dir_x[row], dir_y[row], self._circle_centre, self._circle_radius))
         ranges[ranges > self._params.range_max_m] = np.inf
         return ranges
 
@@ -313,12 +343,14 @@ class ScanRequest:
         robot_pose: the robot's pose in the map frame (m, rad).
         rng: the noise stream of this scan (None: noiseless).
         sigma_m: the range noise's standard deviation (m).
+        discs: the other robots of its world, rows of (x, y, radius) (m).
     """
 
     lidar: Lidar
     robot_pose: Pose2D
     rng: np.random.Generator | None = None
     sigma_m: float = 0.0
+    discs: FloatArray = field(default_factory=lambda: NO_DISCS, compare=False)
 
 
 def scan_many(requests: Sequence[ScanRequest]) -> list[LaserScan]:
@@ -338,5 +370,8 @@ def scan_many(requests: Sequence[ScanRequest]) -> list[LaserScan]:
             [requests[index].robot_pose for index in indices])
         for index, raw in zip(indices, raws, strict=True):
             request = requests[index]
+            if len(request.discs):
+                raw = request.lidar.add_discs(raw, request.robot_pose, request.discs)
+                raw[raw > request.lidar.params.range_max_m] = np.inf
             scans[index] = request.lidar.scan_from_raw(raw, request.rng, request.sigma_m)
     return [scans[index] for index in range(len(requests))]

@@ -91,7 +91,7 @@ def test_a_physics_exception_in_a_step_is_caught_and_the_robot_reset() -> None:
 @pytest.mark.parametrize("mode", ["kinematic", "dynamic"])
 def test_a_state_gone_non_finite_is_reset_to_spawn(mode: str) -> None:
     def fault(server: SimServer) -> None:
-        server.robot.sim._robot.teleport(Pose2D(math.nan, math.inf, 0.0))
+        server.robot.sim.model.teleport(Pose2D(math.nan, math.inf, 0.0))
 
     health, rate_hz, server = asyncio.run(run_with_fault(fault, mode=mode))
     assert_recovered(health, rate_hz, server, "stepping the robot: FloatingPointError")
