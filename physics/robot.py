@@ -94,6 +94,7 @@ class MobileRobotPhysics:
         self._omega = 0.0
         self._collided = False
         self._samples: list[EncoderSample] = []
+        self._held = False
         self._set_body_type()
         self.teleport(start)
 
@@ -114,6 +115,26 @@ class MobileRobotPhysics:
     @mode.setter
     def mode(self, mode: str) -> None:
         self._mode = _checked_mode(mode)
+        self._set_body_type()
+        self._sync_body()
+
+    @property
+    def held(self) -> bool:
+        """Whether it is held where it stands (``hold``)."""
+        return self._held
+
+    def hold(self, held: bool) -> None:
+        """Hold the robot where it stands, at rest, or let it go (``held`` False).
+
+        A paused robot in a world that runs on. A held robot is not stepped; to the others it
+        is an obstacle that does not yield (its body is placed by hand, as a kinematic
+        robot's).
+        """
+        if held == self._held:
+            return
+        self._held = held
+        if held:
+            self._v = self._omega = 0.0
         self._set_body_type()
         self._sync_body()
 
@@ -149,7 +170,7 @@ class MobileRobotPhysics:
             self._shape = self._make_footprint(params)
             self._space.add(self._shape)
         self._params = params
-        if self._mode == "dynamic":
+        if self._body.body_type == pymunk.Body.DYNAMIC:
             self._body.mass = params.mass_kg
             self._body.moment = params.inertia_kg_m2
 
@@ -192,7 +213,7 @@ class MobileRobotPhysics:
         it models holds its commanded speed), and pymunk never moves it.
         """
         body = self._body
-        if self._mode == "dynamic":
+        if self._mode == "dynamic" and not self._held:
             if body.body_type != pymunk.Body.DYNAMIC:
                 body.body_type = pymunk.Body.DYNAMIC
             body.mass = self._params.mass_kg
@@ -205,7 +226,7 @@ class MobileRobotPhysics:
         body = self._body
         body.position = (self._pose.x, self._pose.y)
         body.angle = self._pose.theta
-        if self._mode == "dynamic":
+        if body.body_type == pymunk.Body.DYNAMIC:
             body.velocity = (self._v * math.cos(self._pose.theta),
                              self._v * math.sin(self._pose.theta))
             body.angular_velocity = self._omega
@@ -219,7 +240,7 @@ class MobileRobotPhysics:
         Before pymunk steps or is queried: the others' contacts and the reference scan see it
         there.
         """
-        if self._mode == "kinematic":
+        if self._body.body_type == pymunk.Body.KINEMATIC:
             self._sync_body()
             self._space.reindex_shapes_for_body(self._body)
 

@@ -366,6 +366,20 @@ class WorldSim:
             self._reset_row(row, None if seed is None else RobotSeed.of(seed, row.name),
                             rows[index + 1:])
 
+    def hold(self, name: str, held: bool = True) -> None:
+        """Hold robot ``name`` where it stands (``held`` True) or let it go on.
+
+        A held robot is not stepped and its time stands still, while the world and the other
+        robots go on: to them it is an obstacle that does not yield. What a paused robot of a
+        shared world is (a world of one whose robot is paused is simply not stepped).
+        """
+        self._row(name).model.hold(held)
+        self._moved()
+
+    def is_held(self, name: str) -> bool:
+        """Whether robot ``name`` is held (``hold``)."""
+        return self._row(name).model.held
+
     def set_mode(self, name: str, mode: str) -> None:
         """Switch robot ``name``'s model between ticks; pose and velocity are carried over."""
         self._row(name).model.mode = mode
@@ -403,19 +417,23 @@ class WorldSim:
             self._step_once()
 
     def _step_once(self) -> None:
-        rows = list(self._robots.values())
+        everyone = list(self._robots.values())
+        rows = [row for row in everyone if not row.model.held]
+        for row in everyone:
+            if row.model.held:
+                row.start_tick += 1  # its time stands still
         dt_s = self._dt_s
         samples: dict[str, Sequence[Any]] = {}
         kinematic = [row for row in rows if row.model.mode == "kinematic"]
         dynamic = [row for row in rows if row.model.mode == "dynamic"]
-        neighbours = self._neighbours(rows) if len(rows) > 1 else {}
+        neighbours = self._neighbours(everyone) if len(everyone) > 1 else {}
         for row in kinematic:  # in turn: each against the others where they stand now
             others = [self._robots[other].model.footprint
                       for other in neighbours.get(row.name, ())]
             samples[row.name] = row.model.step_kinematic(row.command, dt_s, others)
         if dynamic:
-            for row in kinematic:
-                row.model.place_body()
+            for row in everyone:
+                row.model.place_body()  # kinematic and held ones: where they stand
             substeps, sub_dt = dynamic_substeps(dt_s)
             for row in dynamic:
                 row.model.begin_dynamic()
@@ -449,7 +467,8 @@ class WorldSim:
         xy = np.array([(row.model.pose.x, row.model.pose.y) for row in rows])
         radius = np.array([row.model.params.footprint_radius_m for row in rows])
         moving = np.array([abs(row.command.linear_mps) * self._dt_s
-                           if row.model.mode == "kinematic" else 0.0 for row in rows])
+                           if row.model.mode == "kinematic" and not row.model.held else 0.0
+                           for row in rows])
         gap = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
         reach = radius[:, None] + radius[None, :] + moving[:, None] + moving[None, :] + \
             REACH_SLACK_M

@@ -15,16 +15,9 @@ from physics import MODES, TICK_PERIOD_S, ConfigError, Simulation, load_params, 
 from physics.params import SHIPPED_PARAMS_FILE
 from physics.world import WORLDS_DIR
 from ros_nodes.robot_description import robot_json
+from ros_nodes.sim_clock import MAX_SPEED, MIN_SPEED, SPEED_MAX, SimClock
 from ros_nodes.virtual_robot_core import VirtualRobot
-from rosbridge.core.clock import (
-    MAX_SPEED,
-    MIN_SPEED,
-    SPEED_MAX,
-    WALL_CLOCK,
-    Clock,
-    SimClock,
-    WallClock,
-)
+from rosbridge.core.clock import WALL_CLOCK, Clock, WallClock
 from websim import compare_command, compare_real, fit_command, grade_command, map_command, sites
 from websim import replay as replay_command
 from websim import serve as serve_command
@@ -199,9 +192,12 @@ def parse_speed(text: str) -> float:
     return speed
 
 
-def make_clock(speed: float | None) -> Clock:
-    """The server's one clock: wall time (no ``--speed``), else sim time at ``speed``."""
-    return WallClock() if speed is None else SimClock(TICK_PERIOD_S, speed)
+def make_clock(speed: float | None, epoch_s: float | None = None) -> Clock:
+    """A robot's clock: wall time (no ``--speed``), else sim time at ``speed``.
+
+    Sim time starts at ``epoch_s`` (default: the wall time now) and follows its world's ticks.
+    """
+    return WallClock() if speed is None else SimClock(TICK_PERIOD_S, speed, epoch_s)
 
 
 def _run_demo(args: argparse.Namespace) -> int:
@@ -266,19 +262,25 @@ def _run_serve(args: argparse.Namespace) -> int:
                           "--public-ws-port (the proxy's ports): with one, the links would mix "
                           "this process's port with the proxy's")
     limits, origins = serve_command.limits_from(args), serve_command.origins_from(args)
-    clock = make_clock(args.speed)  # the one clock of the server: every robot's, the class's
+    clock = make_clock(args.speed)  # the server's: the single robot's, a class's intervals
     recorder = serve_command.recorder_from(args)
     if args.class_spec is None:
         robot = VirtualRobot(make_simulation(args), clock, localization=args.localization)
         site = sites.single_robot(robot, token, limits, origins,
                                   args.public_ws_port or args.ws_port, recorder)
         return serve_command.run(args, site, token)
+    # On sim time each student's world keeps its own time and pace (all from the server's
+    # start), but a class on the ROS graph has one /clock: one clock, one pace for all.
+    epoch_s = clock.stamp_s()
+
+    def robot_clock() -> Clock:
+        return clock if args.speed is None or args.ros else make_clock(args.speed, epoch_s)
 
     def make_robot(student: Student) -> VirtualRobot:
         world = args.world if student.world is None else student.world
         return VirtualRobot(make_simulation(argparse.Namespace(**{**vars(args),
-                                                                 "world": world})), clock,
-                            localization=args.localization)
+                                                                 "world": world})),
+                            robot_clock(), localization=args.localization)
 
     platform = load_params(args.params)
     return serve_command.run(args, sites.classroom_site(

@@ -30,14 +30,14 @@ from physics.shipped import shipped
 from physics.world import LOCALIZATIONS
 from ros_nodes.recording import DEFAULT_MAX_MB, Recorder
 from ros_nodes.robot_interface import NODE_NAME
-from ros_nodes.robot_server import SimServer
-from rosbridge.core.clock import SPEED_MAX
+from ros_nodes.sim_clock import SPEED_MAX
 from rosbridge.core.limits import ClientLimits, OriginPolicy, TrustedProxies
 from rosbridge.core.schema import NAME_TOKEN
 from rosbridge.graph.names import RELAY_NODE_NAME
 from rosbridge.transport.front import start_websocket
 from websim.http_server import start_http
 from websim.lan import lan_addresses, qr_lines
+from websim.robot_server import SimServer
 from websim.sites import Site, dashboard_url
 
 WEB_DIR = shipped("websim", "web-interface")
@@ -442,8 +442,8 @@ def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
     if site.classroom is not None:
         localhost_only_discovery(os.environ)
     if site.robot is not None and isinstance(site.front, SimServer):
-        runtime = RosRuntime(site.robot, site.front.bridge, loop,
-                             site.front.host.schedule.writers, simulation=site.simulation)
+        runtime = RosRuntime(site.robot, site.front.bridge, loop, site.front.driver.writers,
+                             simulation=site.simulation)
     elif site.classroom is not None:
         hosts = site.class_hosts()
         unnamable = [name for name, _ in hosts if not NAME_TOKEN.fullmatch(name)]
@@ -451,7 +451,7 @@ def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
             raise RuntimeError(f"--ros: robot names must also be ROS namespaces (a letter or _ "
                                f"first, no -): {', '.join(unnamable[:5])}")
         runtime = ClassRosRuntime([(name, host.robot) for name, host in hosts], loop,
-                                  site.classroom.schedule)
+                                  site.classroom.driver)
     else:
         raise RuntimeError("--ros: this site has neither a robot nor a class")
     runtime.start()

@@ -26,19 +26,20 @@ from classroom.registry import (
     read_roster,
 )
 from classroom.state import ClassState, class_identity, default_state_path
+from heartbeat.driver import TickDriver
+from heartbeat.schedule import Schedule
 from physics import ConfigError, LidarParams, RobotParams
 from ros_nodes.recording import SINGLE_ROBOT_NAME, Recorder
 from ros_nodes.robot_description import robot_json
 from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
 from ros_nodes.robot_interface import ROBOTS_PREFIX
-from ros_nodes.robot_server import SimServer
 from ros_nodes.simulation_services import SimulationServices, add_simulation_services
 from ros_nodes.simulator_control import OneRobotWorld
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.clock import Clock
 from rosbridge.core.limits import ClientLimits, LatchedBytes, OriginPolicy
 from rosbridge.transport.front import WebSocketFront
-from rosbridge.transport.schedule import Schedule
+from websim.robot_server import SimServer
 
 
 @dataclass
@@ -83,13 +84,20 @@ class Site:
             self.classroom.save()
             self.classroom.state.close()
 
-    def schedule(self) -> Schedule:
-        """The tick schedule the robots follow (a class's, or the single robot's host's)."""
+    def schedule(self) -> TickDriver | Schedule:
+        """What ticks the robots: a class's or a robot's tick driver, or a replay's schedule.
+
+        Its ``gates``, ``pacers`` and ``tick_listeners`` apply to every tick.
+        """
         if self.classroom is not None:
-            return self.classroom.schedule
+            return self.classroom.driver
+        if isinstance(self.front, SimServer):
+            return self.front.driver
         destination = self.front.route("/")
         assert not isinstance(destination, str)
-        return destination[0].schedule
+        pace = destination[0].pace
+        assert isinstance(pace, Schedule)
+        return pace
 
     def class_hosts(self) -> list[tuple[str, RobotHost]]:
         """The robots of a class, by name (none for a single robot)."""
