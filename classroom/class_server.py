@@ -21,6 +21,7 @@ from typing import Any
 
 from classroom.instructor_view import InstructorView
 from classroom.registry import ROBOT_NAME, Classroom
+from physics import ConfigError
 from ros_nodes.robot_interface import ROBOTS_PREFIX
 from rosbridge.core.limits import ClientLimits, OriginPolicy
 from rosbridge.transport.connection import Hub
@@ -79,7 +80,10 @@ class ClassServer(WebSocketFront):
         if isinstance(found, str):
             return found
         _, name = found
-        host = self.classroom.get(name or "")
+        try:
+            host = self.classroom.get(name or "")
+        except ConfigError as error:  # a robot that cannot be made (no room in an arena)
+            return str(error)
         if host is None:
             return self.why_unknown(name or "")
         return Destination(host.bridge, self.classroom.pace(name or "")), name

@@ -183,8 +183,9 @@ class Classroom:
 
     Args:
         roster: the students known at start.
-        make_robot: builds a student's robot (its world, the server's parameters), in a world
-            of its own.
+        make_robot: builds a student's robot (its world, the server's parameters): in a world
+            of its own, or in the one world every robot shares (``--arena``): robots whose
+            simulations are of one ``WorldSim`` are ticked as one world.
         driver: the tick driver of every robot (default: one of its own, on ``clock``).
         open_class: enrol unknown names on their first connection.
         max_robots: most robots an open class holds.
@@ -231,6 +232,9 @@ class Classroom:
         self._make_token = make_token or (lambda name: derived_token(self.secret, name))
         self._hosts: dict[str, RobotHost] = {}
         self._worlds: dict[str, WorldHost] = {}
+        self._shared: dict[int, WorldHost] = {}
+        """Each world's host, by its simulation: robots made in one world (``--arena``)
+        share it."""
         self._tokens: dict[str, str] = {}
         self._saved: dict[str, dict[str, Any]] = {} if state is None else state.robots()
         self.unclaimed: set[str] = set()
@@ -255,9 +259,14 @@ class Classroom:
                     self._enrol(self.students[name])
 
     def _enrol(self, student: Student) -> RobotHost:
-        world, host = WorldHost.of(self._make_robot(student), self._idle_pause_s,
-                                   self._latched.for_robot())
-        self.driver.add(world)
+        robot = self._make_robot(student)
+        world = self._shared.get(id(robot.sim.world_sim))
+        if world is None:  # a world of its own (or the first robot of a shared one)
+            world = WorldHost(robot.sim.world_sim, self._idle_pause_s)
+            self._shared[id(robot.sim.world_sim)] = world
+        host = world.add(robot, self._latched.for_robot())
+        if len(world) == 1:
+            self.driver.add(world)
         self._hosts[student.name] = host
         self._worlds[student.name] = world
         self.students[student.name] = student

@@ -220,7 +220,8 @@ class WorldSim:
 
         Args:
             name: its name, unique in the world.
-            pose: where; None: the world's start, or the nearest free pose to it.
+            pose: where; None: the world's start, or the nearest free pose to it (clear of
+                the starts the world file keeps for the robots it places: ``World.robots``).
             params: the robot (default: the Pi 4B robot).
             mode: ``"kinematic"`` or ``"dynamic"``.
             lidar: its LiDAR (default: the world's).
@@ -243,8 +244,9 @@ class WorldSim:
         if mode not in MODES:
             raise ConfigError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
         params = RobotParams() if params is None else params
-        if pose is None:
-            pose = self.free_pose_near(self._world.start, params.footprint_radius_m)
+        if pose is None:  # clear of the places the world keeps for robots not here yet
+            pose = self._free_pose(self._world.start, params.footprint_radius_m, (),
+                                   self._kept_places(name))
         pose = Pose2D(*(as_finite_float(f"{name}: pose", value) for value in pose))
         self._check_clear(pose.x, pose.y, params.footprint_radius_m, None,
                           f"{self._world.source}: {name}", f"spawn pose {list(pose)}")
@@ -615,8 +617,22 @@ class WorldSim:
         """
         return self._free_pose(pose, radius_m, ())
 
-    def _free_pose(self, pose: Pose2D, radius_m: float, skip: Collection[_Robot]) -> Pose2D:
-        if self._blocked(pose.x, pose.y, radius_m, skip) is None:
+    def _kept_places(self, name: str) -> list[Disc]:
+        """The starts the world file keeps for robots it places that are not here yet."""
+        default = RobotParams().footprint_radius_m
+        return [Disc(placed.start.x, placed.start.y,
+                     dict(placed.params).get("footprint_radius_m", default))
+                for placed in self._world.robots
+                if placed.name != name and placed.name not in self._robots]
+
+    def _free_pose(self, pose: Pose2D, radius_m: float, skip: Collection[_Robot],
+                   kept: Sequence[Disc] = ()) -> Pose2D:
+        def blocked(x: float, y: float) -> bool:
+            return self._blocked(x, y, radius_m, skip) is not None or any(
+                math.hypot(x - place.x, y - place.y) < radius_m + place.radius_m
+                for place in kept)
+
+        if not blocked(pose.x, pose.y):
             return pose
         min_x, min_y, max_x, max_y = self._world.bounds
         farthest = math.hypot(max_x - min_x, max_y - min_y)
@@ -629,7 +645,7 @@ class WorldSim:
                 angle = 2.0 * math.pi * k / count
                 x = pose.x + distance * math.cos(angle)
                 y = pose.y + distance * math.sin(angle)
-                if self._blocked(x, y, radius_m, skip) is not None:
+                if blocked(x, y):
                     continue
                 if space.segment_query_first((pose.x, pose.y), (x, y), 0.0,
                                              WALLS_ONLY) is not None:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,7 +32,7 @@ from ros_nodes.robot_interface import (
 from ros_nodes.robot_services import require_admin
 from ros_nodes.sensors import Sensor
 from ros_nodes.simulation_services import WATCHABLE_SERVICES
-from ros_nodes.virtual_robot_core import VirtualRobot
+from ros_nodes.virtual_robot_core import Publication, VirtualRobot
 from rosbridge.core.access import DriveRules
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.errors import ServiceError
@@ -208,11 +208,19 @@ class RobotHost:
         return [sensor for sensor in self.robot.due(self._wanted())
                 if not (shed and sensor.sheddable)]
 
-    def end_tick(self, write: Write, lateness_s: float = 0.0) -> None:
+    def wants(self, topic: str) -> bool:
+        """Whether a client of the robot subscribes to ``topic`` (a ROS graph: to all)."""
+        wanted = self._wanted()
+        return wanted is None or topic in wanted
+
+    def end_tick(self, write: Write, lateness_s: float = 0.0,
+                 shared: Sequence[Publication] = ()) -> None:
         """Build and deliver the messages of the tick just stepped; never raises.
 
         ``write`` has each flush written: the clients closing a loop first, before the
-        watchers' frames are even queued.
+        watchers' frames are even queued. ``shared``: messages of the robot's world, built
+        once for all its robots (``/world_robots``), delivered to its clients that want them
+        (the world's, not the robot's: its tap does not carry them).
 
         Only messages some client subscribes to are built (for a ROS graph: all). A tick that
         starts half a period late builds no sheddable sensor's message (/scan): it is shed,
@@ -232,6 +240,8 @@ class RobotHost:
         else:
             self.stats.scans_cast += 0 if shed else sheddable
         messages = [(spec.name, msg) for spec, msg in publications]
+        messages += [(spec.name, msg) for spec, msg in shared
+                     if wanted is None or spec.name in wanted]
         try:  # throttles count from when the tick was due: a late tick is no shorter gap
             for flush in self.bridge.publish_many(messages,
                                                   self._clock.monotonic_s() - lateness_s):

@@ -8,7 +8,8 @@ three parts, so the driver can do the middle one for many worlds at once:
    (collision count; a state gone non-finite is reset);
 2. the tick's scan pass: ``scans_due`` lists the robots whose LiDAR scan a message will read;
    the driver casts them with every other world's (``physics.simulation.cast_scans``);
-3. ``end_tick``: each robot's host builds its messages (the scans are ready) and delivers them.
+3. ``end_tick``: each robot's host builds its messages (the scans are ready) and delivers them,
+   with the world's own, ``/world_robots``, built once for all of them.
 
 A world of one robot (``websim serve``, each student's in a class) whose robot is paused is
 not stepped at all: its time stands still. In a world of several (an arena) a paused robot is
@@ -23,7 +24,9 @@ from collections.abc import Iterator
 from physics import Simulation, WorldSim
 from physics.simulation import cast_scans
 from ros_nodes.robot_host import RobotHost, Write
-from ros_nodes.virtual_robot_core import VirtualRobot
+from ros_nodes.robot_interface import WORLD_ROBOTS
+from ros_nodes.robot_messages import world_robots_msg
+from ros_nodes.virtual_robot_core import Publication, VirtualRobot
 from rosbridge.core.clock import Clock
 from rosbridge.core.limits import LatchedBytes
 
@@ -124,9 +127,29 @@ class WorldHost:
         return [host.robot.sim for host in self._stepped if host.reads_scan(lateness_s)]
 
     def end_tick(self, write: Write, lateness_s: float = 0.0) -> None:
-        """Each stepped robot builds and delivers its messages (``RobotHost.end_tick``)."""
+        """Each stepped robot builds and delivers its messages (``RobotHost.end_tick``).
+
+        The world's own message, ``/world_robots`` (every robot at this tick), is built once
+        for all its robots, if a client of one of them wants it.
+        """
+        shared = self._shared_publications()
         for host in self._stepped:
-            host.end_tick(write, lateness_s)
+            host.end_tick(write, lateness_s, shared)
+
+    def _shared_publications(self) -> list[Publication]:
+        if not any(host.wants(WORLD_ROBOTS.name) for host in self._stepped):
+            return []
+        world = self.world
+        try:
+            footprints = world.footprints()
+            msg = world_robots_msg(world.names, world.poses().tolist(),
+                                   footprints[:, 2].tolist(),
+                                   self._stepped[0].robot.clock.stamp_s())
+        except Exception as error:  # the world's message: every robot's fault
+            for host in self._stepped:
+                host.faults.record(f"building {WORLD_ROBOTS.name}", error)
+            return []
+        return [(WORLD_ROBOTS, msg)]
 
     def tick(self, write: Write, lateness_s: float = 0.0) -> None:
         """A whole tick of this world alone: step, its own scan pass, deliver."""

@@ -15,6 +15,7 @@ import pytest
 from physics import ConfigError, NoiseParams, Pose2D, RobotParams, Simulation, WorldSim, load_world
 from physics.robot import CONTACT_SKIN_M, MAX_SUBSTEP_S
 from physics.space import COLLISION_SLOP_M
+from physics.world import world_from_dict
 
 RADIUS_M = RobotParams().footprint_radius_m
 RANGE_MAX_M = 3.5
@@ -232,3 +233,35 @@ def test_a_robot_spawned_later_counts_its_own_time() -> None:
     world.step(3)
     assert (world.tick, world.robot_tick("a"), world.robot_tick("b")) == (10, 10, 3)
     assert Simulation.of(world, "b").time_s == pytest.approx(0.15)
+
+
+def test_a_world_file_places_robots_by_name_and_checks_them() -> None:
+    world = world_from_dict({
+        "start": [0.0, 0.0, 0.0],
+        "robots": [{"name": "alice", "start": [0.1, 0.0, 0.0]},
+                   {"name": "bob", "start": [1.0, 0.0, 3.0],
+                    "params": {"mass_kg": 2.0, "footprint_radius_m": 0.2}}]}, source="w.yaml")
+    assert [robot.name for robot in world.robots] == ["alice", "bob"]
+    bob = world.placed("bob")
+    assert bob is not None and bob.params_over(RobotParams()).mass_kg == 2.0
+    assert world.placed("carol") is None
+    arena = WorldSim(world, seed=0)
+    # carol comes first: the world's start is free of robots, but alice's start is kept
+    carol = arena.spawn("carol")
+    assert math.hypot(carol.x - 0.1, carol.y) >= 2 * RADIUS_M
+    assert arena.spawn("alice", world.robots[0].start) == world.robots[0].start
+    for bad, match in [
+        ({"robots": [{"name": "a", "start": [0, 0, 0]}, {"name": "a", "start": [1, 0, 0]}]},
+         r"robots\[1\]\.name: 'a' is placed twice"),
+        ({"robots": [{"name": "a", "start": [0, 0, 0]}, {"name": "b", "start": [0.1, 0, 0]}]},
+         r"robots\[1\]\.start: .* overlaps that of 'a'"),
+        ({"robots": [{"name": "a", "start": [0, 0, 0], "params": {"mas_kg": 1}}]},
+         "did you mean 'mass_kg'"),
+        ({"robots": [{"name": "a", "start": [0, 0, 0], "params": {"mass_kg": -1}}]},
+         r"robots\[0\]\.params\.mass_kg: must be between"),
+        ({"robots": [{"name": "a"}]}, r"robots\[0\]\.start: missing"),
+        ({"circles": [{"center": [0, 0], "radius": 0.5}], "start": [2, 2, 0],
+          "robots": [{"name": "a", "start": [0.1, 0, 0]}]}, "inside the circle"),
+    ]:
+        with pytest.raises(ConfigError, match=match):
+            world_from_dict(bad, source="w.yaml")

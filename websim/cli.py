@@ -7,11 +7,19 @@ import importlib.metadata
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from classroom import nginx_config
 from classroom.registry import Student, check_name, strong_token, weak_token
-from physics import MODES, TICK_PERIOD_S, ConfigError, Simulation, load_params, load_world
+from physics import (
+    MODES,
+    TICK_PERIOD_S,
+    ConfigError,
+    Simulation,
+    WorldSim,
+    load_params,
+    load_world,
+)
 from physics.params import SHIPPED_PARAMS_FILE
 from physics.world import WORLDS_DIR
 from ros_nodes.robot_description import robot_json
@@ -264,13 +272,27 @@ def _run_serve(args: argparse.Namespace) -> int:
     limits, origins = serve_command.limits_from(args), serve_command.origins_from(args)
     clock = make_clock(args.speed)  # the server's: the single robot's, a class's intervals
     recorder = serve_command.recorder_from(args)
+    if args.arena and args.class_spec is None:
+        raise ConfigError("--arena puts a class's robots in one world: it needs --class")
     if args.class_spec is None:
         robot = VirtualRobot(make_simulation(args), clock, localization=args.localization)
         site = sites.single_robot(robot, token, limits, origins,
                                   args.public_ws_port or args.ws_port, recorder)
         return serve_command.run(args, site, token)
-    # On sim time each student's world keeps its own time and pace (all from the server's
-    # start), but a class on the ROS graph has one /clock: one clock, one pace for all.
+    make_robot = arena_robots(args, clock) if args.arena else class_robots(args, clock)
+
+    platform = load_params(args.params)
+    return serve_command.run(args, sites.classroom_site(
+        args, make_robot, (platform.robot, platform.lidar), token, limits, origins, clock,
+        recorder), token)
+
+
+def class_robots(args: argparse.Namespace, clock: Clock) -> Callable[[Student], VirtualRobot]:
+    """``--class``: each student's robot in a world of its own (the roster's, or ``--world``).
+
+    On sim time each world keeps its own time and pace (all from the server's start), but a
+    class on the ROS graph has one ``/clock``: one clock, one pace for all.
+    """
     epoch_s = clock.stamp_s()
 
     def robot_clock() -> Clock:
@@ -282,10 +304,39 @@ def _run_serve(args: argparse.Namespace) -> int:
                                                                  "world": world})),
                             robot_clock(), localization=args.localization)
 
+    return make_robot
+
+
+def arena_robots(args: argparse.Namespace, clock: Clock) -> Callable[[Student], VirtualRobot]:
+    """``--class --arena``: every student's robot spawned into the one ``--world``.
+
+    A robot the world places (its ``robots`` list) starts where it says, with its parameters
+    over the parameter file's; the others at the nearest free place to the world's start.
+    Each robot's noise streams come from ``--seed`` and its name: the same seed, the same run.
+
+    Raises:
+        ConfigError: with ``--worker`` (one world cannot be split over processes).
+    """
+    if getattr(args, "worker", False):
+        raise ConfigError("--arena puts every robot in one world: it cannot be split over "
+                          "--worker processes")
     platform = load_params(args.params)
-    return serve_command.run(args, sites.classroom_site(
-        args, make_robot, (platform.robot, platform.lidar), token, limits, origins, clock,
-        recorder), token)
+    world = load_world(args.world)
+    arena = WorldSim(world, seed=args.seed, lidar=platform.lidar,
+                     noise=world.noise_over(platform.noise))
+
+    def make_robot(student: Student) -> VirtualRobot:
+        if student.world is not None and student.world != args.world:
+            raise ConfigError(f"robot '{student.name}': the roster gives it the world "
+                              f"'{student.world}', but --arena puts every robot in --world")
+        placed = world.placed(student.name)
+        arena.spawn(student.name, None if placed is None else placed.start,
+                    platform.robot if placed is None else placed.params_over(platform.robot),
+                    mode=args.mode)
+        return VirtualRobot(Simulation.of(arena, student.name), clock,
+                            localization=args.localization)
+
+    return make_robot
 
 
 def _run_replay(args: argparse.Namespace) -> int:

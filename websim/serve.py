@@ -118,6 +118,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --class: a new name enrols on its first connection, which "
                              "is handed that robot's token (its page keeps it); nobody else "
                              "can take the name afterwards")
+    parser.add_argument("--arena", action="store_true",
+                        help="with --class: every student's robot in the one --world, where "
+                             "they see each other (LiDAR) and collide; a robot the world "
+                             "file places (its robots: list) starts there, the others at the "
+                             "nearest free place to its start; see docs/arena.md")
     parser.add_argument("--open-drive", action="store_true",
                         help="with --class: any connection may drive and reset any robot "
                              "(default: only with the robot's token or the instructor's; "

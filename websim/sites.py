@@ -62,6 +62,8 @@ class Site:
             ``ClassRosRuntime``) while it runs, else None.
         simulation: the single robot's simulation services (``simulation_interfaces``),
             which ``--ros`` also offers on the graph; None for a class.
+        arena: a class whose robots share one world (``--arena``): the dashboard also
+            draws it as one map.
     """
 
     front: WebSocketFront
@@ -75,6 +77,7 @@ class Site:
     description: str | None = None
     ros: Any = None
     simulation: SimulationServices | None = None
+    arena: bool = False
 
     def close(self) -> None:
         """Close the recordings, save a class's state and release its file (at shutdown)."""
@@ -129,24 +132,28 @@ class Site:
                         return self.description
                     return robot_json(self.robot.sim.params, self.robot.sim.lidar.params)
                 url = f"ws://{_url_name(hostname)}:{self.ws_port}/"
-                return json.dumps({"about": "this server's robot, filled by websim serve: "
-                                            "the bridge of the server that served the page",
-                                   "ws": url, "adminWs": url})
+                config: dict[str, object] = {
+                    "about": "this server's robot, filled by websim serve: the bridge of the "
+                             "server that served the page", "ws": url, "adminWs": url}
+                if self.robot is not None:  # its name in its world: its /world_robots marker
+                    config["entity"] = self.robot.sim.name
+                return json.dumps(config)
             if name == "robot.json":  # a class's root (the dashboard): a class robot's
                 return self.new_robot_json
             url = f"ws://{_url_name(hostname)}:{self.ws_port}/"
             return json.dumps({"about": "the instructor's view of this class, filled by "
-                                        "websim serve; robotsPath: where its robots' pages are",
-                               "ws": url, "adminWs": url, "robotsPath": ROBOTS_PREFIX})
+                                        "websim serve; robotsPath: where its robots' pages are; "
+                                        "arena: whether they share one world",
+                               "ws": url, "adminWs": url, "robotsPath": ROBOTS_PREFIX,
+                               "arena": self.arena})
         if name == "robot.json":
             host = dict(self.class_hosts()).get(robot)
             if host is None:
                 return self.new_robot_json
             return robot_json(host.robot.sim.params, host.robot.sim.lidar.params)
         url = f"ws://{_url_name(hostname)}:{self.ws_port}{ROBOTS_PREFIX}{robot}"
-        config: dict[str, object] = {"about": f"robot {robot} of this class, filled by websim "
-                                              "serve", "ws": url, "adminWs": url,
-                                     "robot": robot}
+        config = {"about": f"robot {robot} of this class, filled by websim serve", "ws": url,
+                  "adminWs": url, "robot": robot, "entity": robot}
         if self.classroom is not None and self.classroom.open_class:
             # the service that hands a newly enrolled robot's token to its first connection
             config["robotToken"] = {"name": TOKEN_SERVICE, "type": "websim/srv/RobotToken"}
@@ -226,13 +233,16 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
     site = Site(ClassServer(classroom, token, limits=limits, origins=origins,
                             open_drive=open_drive),
                 ws_port=args.public_ws_port or args.ws_port, classroom=classroom,
-                new_robot_json=robot_json(*new_robot_params), recorder=recorder)
+                new_robot_json=robot_json(*new_robot_params), recorder=recorder,
+                arena=getattr(args, "arena", False))
     names = list(classroom.students)
     notes = [note for note, wanted in (("new names enrol (open class)", args.open_class),
                                        ("a worker: a robot is made when first routed here",
                                         args.worker)) if wanted]
     if open_drive:
         notes.append("anyone may drive any robot (--open-drive)")
+    if getattr(args, "arena", False):
+        notes.append("every robot in the one world (--arena)")
     first, last = (names[0], names[-1]) if names else ("none yet", "none yet")
     site.banner.append(f"class:     {len(names)} robots ({first} ... {last}), each at "
                        f"{ROBOTS_PREFIX}NAME/ on both ports" + "".join(f"; {n}" for n in notes))
