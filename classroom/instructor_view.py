@@ -116,6 +116,7 @@ class InstructorView:
                               "(/websim/robots lists them)")
         inner = Session(session.peer, True, session.outbox, limits=session.limits,
                         namespace=f"/{robot}")
+        inner.server_admin = True  # the instructor's, on every robot
         inner.status_level = session.status_level
         host.bridge.connect(inner)
         self._inner[robot] = (host.bridge, inner)

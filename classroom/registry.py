@@ -76,11 +76,14 @@ class Student:
         name: the robot's name (``[a-z0-9_-]{1,32}``): ``/robots/NAME``.
         world: a world for this robot (file or shipped name); None: the server's.
         token: the robot's own admin token; None: a random one is made.
+        start: where it spawns in a shared world (a robot spawned while the arena runs);
+            None: where the world places it.
     """
 
     name: str
     world: str | None = None
     token: str | None = None
+    start: Pose2D | None = None
 
 
 def check_name(name: str, where: str = "robot name") -> str:
@@ -202,8 +205,9 @@ class Classroom:
         latched: the server's pool of clients' latched messages, each robot's within it
             (default: one of the default sizes).
         recorder: records every robot from its creation on (``--record``); None: none.
-        on_robot: called with (name, host) of each robot once it is made (``websim serve``
-            adds its simulation services: ``ros_nodes.simulation_services``).
+        on_robot: called with (the class, name, host, its world's host) of each robot once
+            it is made (``websim serve`` adds its simulation services:
+            ``ros_nodes.simulation_services``).
     """
 
     def __init__(self, roster: list[Student], make_robot: Callable[[Student], VirtualRobot],
@@ -214,7 +218,8 @@ class Classroom:
                  clock: Clock | None = None, state: ClassState | None = None,
                  latched: LatchedBytes | None = None,
                  recorder: Recorder | None = None,
-                 on_robot: Callable[[str, RobotHost], Any] | None = None) -> None:
+                 on_robot: Callable[[Classroom, str, RobotHost, WorldHost], Any] | None = None
+                 ) -> None:
         self._recorder = recorder
         self._on_robot = on_robot
         self.clock: Clock = WallClock() if clock is None else clock
@@ -233,6 +238,9 @@ class Classroom:
         self._hosts: dict[str, RobotHost] = {}
         self._worlds: dict[str, WorldHost] = {}
         self._shared: dict[int, WorldHost] = {}
+        self._spawned: dict[str, str | None] = {}
+        """Robots spawned while the class runs (``spawn``), and who spawned each (None: the
+        instructor)."""
         """Each world's host, by its simulation: robots made in one world (``--arena``)
         share it."""
         self._tokens: dict[str, str] = {}
@@ -288,7 +296,7 @@ class Classroom:
         if self._recorder is not None:
             host.recording = self._recorder.record(name, host.robot)
         if self._on_robot is not None:
-            self._on_robot(name, host)
+            self._on_robot(self, name, host, world)
         return host
 
     def __iter__(self) -> Iterator[tuple[str, RobotHost]]:
@@ -296,6 +304,57 @@ class Classroom:
 
     def __len__(self) -> int:
         return len(self._hosts)
+
+    def spawn(self, name: str, pose: Pose2D, owner: str | None) -> None:
+        """Add robot ``name`` at ``pose`` to the class (an arena's ``SpawnEntity``).
+
+        It is a robot of the class as a student's is (``/robots/NAME``, a token derived from
+        the class's secret, its state kept), spawned by ``owner`` (None: the instructor).
+
+        Raises:
+            ConfigError: an invalid or taken name, a full class, or no room at ``pose``.
+        """
+        check_name(name, "entity name")
+        if name in self.students or name in self._hosts:
+            raise ConfigError(f"entity name: '{name}' is a robot of this class already")
+        if len(self._hosts) >= self.max_robots:
+            raise ConfigError(f"the class is full ({self.max_robots} robots)")
+        student = Student(name, start=pose)
+        self.students[name] = student
+        try:
+            self._enrol(student)
+        except BaseException:
+            del self.students[name]
+            raise
+        self._spawned[name] = owner
+        log.info("robot %s spawned%s", name, f" by {owner}" if owner else "")
+
+    def delete(self, name: str) -> None:
+        """Take robot ``name`` out of the class and its world (KeyError: no such robot).
+
+        Its clients stay connected to a robot that no longer ticks until they leave.
+        """
+        host = self._hosts.pop(name)
+        world = self._worlds.pop(name)
+        world.remove(name)
+        if not len(world):
+            self.driver.remove(world)
+            self._shared.pop(id(world.world), None)
+        self.students.pop(name, None)
+        self._tokens.pop(name, None)
+        self._spawned.pop(name, None)
+        self.unclaimed.discard(name)
+        if host.recording is not None:
+            host.recording.detach()  # its bag ends here
+        log.info("robot %s deleted", name)
+
+    def owner(self, name: str) -> str | None:
+        """Who spawned robot ``name`` (None: the instructor, or a robot of the roster)."""
+        return self._spawned.get(name)
+
+    def spawned(self, name: str) -> bool:
+        """Whether robot ``name`` was spawned while the class runs."""
+        return name in self._spawned
 
     def world(self, name: str) -> WorldHost:
         """The world robot ``name`` lives in (KeyError: no robot of that name here yet)."""

@@ -9,8 +9,9 @@ Example::
     sim.odometry(), sim.ground_truth(), sim.scan()
 
 ``Simulation(world, ...)`` is a world of one robot (``physics.world_sim.WorldSim``), named
-``SINGLE_ROBOT``. ``WorldSim.spawn`` gives the same view of a robot of a world of many
-(``Simulation.of``): its readings and commands are its own, ``step`` steps its whole world.
+``SINGLE_ROBOT`` unless given a name. ``Simulation.of(world, name)`` is the same view of a
+robot of a world of many: its readings and commands are its own, ``step`` steps its whole
+world.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ class Simulation:
         lidar: the LiDAR; defaults to the shipped parameters.
         noise: noise sigmas; defaults to the shipped parameters (noiseless).
         dt_s: tick length (s).
+        name: the robot's name in its world (a class robot's: its student's).
 
     Raises:
         ConfigError: the robot's footprint at the start pose overlaps a wall.
@@ -50,7 +52,7 @@ class Simulation:
     def __init__(self, world: World, params: RobotParams | None = None, *,
                  mode: str = "kinematic", seed: int | None = None,
                  lidar: LidarParams | None = None, noise: NoiseParams | None = None,
-                 dt_s: float = TICK_PERIOD_S) -> None:
+                 dt_s: float = TICK_PERIOD_S, name: str = SINGLE_ROBOT) -> None:
         params = RobotParams() if params is None else params
         if mode not in ("kinematic", "dynamic"):
             raise ValueError(f"mode must be one of kinematic, dynamic, got {mode!r}")
@@ -58,8 +60,8 @@ class Simulation:
         self._world_sim._check_clear(world.start.x, world.start.y, params.footprint_radius_m,
                                      None, f"{world.source}: start",
                                      f"start {list(world.start)}")
-        self._world_sim.spawn(SINGLE_ROBOT, world.start, params, mode=mode, seed=seed)
-        self._name = SINGLE_ROBOT
+        self._world_sim.spawn(name, world.start, params, mode=mode, seed=seed)
+        self._name = name
 
     @classmethod
     def of(cls, world_sim: WorldSim, name: str) -> Simulation:

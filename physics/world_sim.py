@@ -14,13 +14,15 @@ Example::
 
 A world holds one definition of its static shapes (``physics.geometry.WorldShapes`` for numpy,
 ``physics.space.WorldSpace`` for pymunk) and its robots in spawn order. ``step`` advances all
-of them by one tick: kinematic robots first, each in turn stopping at contact with a wall or
-with another robot where that one stands now (so no two footprints ever overlap), then the
-dynamic robots together in pymunk (one space, one ``Space.step`` per substep: contacts between
-bodies are pymunk's). What every robot needs at once is an array (``poses``, ``footprints``:
-one row per robot, spawn order); what one robot integrates (odometry, wheels, its noise
-streams) stays its own. ``Simulation`` (``physics.simulation``) is one robot's view of its
-world, with the API a single robot always had.
+of them by one tick: each one's command through its motor driver
+(``physics.command_pipeline``: lag, scales, ramps), then the kinematic robots first, each in
+turn stopping at contact with a wall or with another robot where that one stands now (so no
+two footprints ever overlap), then the dynamic robots together in pymunk (one space, one
+``Space.step`` per substep: contacts between bodies are pymunk's). What every robot needs at
+once is an array (``poses``, ``footprints``: one row per robot, spawn order); what one robot
+integrates (odometry, wheels, its noise streams) stays its own. ``Simulation``
+(``physics.simulation``) is one robot's view of its world, with the API a single robot always
+had.
 
 The world counts its ticks (``tick``): the one tick counter. A robot's own time (its ``tick``
 and ``time_s``, what its sensors' rates and its odometry count) starts at its spawn or its last
@@ -41,6 +43,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from physics.command_pipeline import AT_REST, drive
 from physics.frames import map_to_odom
 from physics.geometry import WorldShapes, world_shapes
 from physics.kinematics import clamp_command
@@ -98,6 +101,10 @@ class _Robot:
         self.odometry = OdometryIntegrator()
         self.wheels = WheelEncoders()
         self.command = Command(0.0, 0.0)
+        self.drive = AT_REST
+        """The motor driver's memory (``physics.command_pipeline``)."""
+        self.wheels_command = Command(0.0, 0.0)
+        """What the driver gives the wheels this tick."""
         self.start_tick = tick
         self.scan_cache: tuple[int, LaserScan] | None = None
         self.episode = 0
@@ -305,6 +312,7 @@ class WorldSim:
                           f"teleport {name}", f"{list(pose)}")
         row.model.teleport(pose)
         row.command = Command(0.0, 0.0)
+        row.drive = AT_REST
         self._moved()
 
     def place(self, name: str, pose: Pose2D, odometry: Pose2D) -> None:
@@ -321,6 +329,7 @@ class WorldSim:
         row.odometry.place(odometry)
         row.wheels.reset()
         row.command = Command(0.0, 0.0)
+        row.drive = AT_REST
         self._moved()
 
     def reset_robot(self, name: str, *, seed: int | None = None) -> Pose2D:
@@ -349,6 +358,7 @@ class WorldSim:
         row.odometry.reset()
         row.wheels.reset()
         row.command = Command(0.0, 0.0)
+        row.drive = AT_REST
         row.start_tick = self._tick
         row.scan_cache = None
         self._moved()
@@ -426,13 +436,16 @@ class WorldSim:
                 row.start_tick += 1  # its time stands still
         dt_s = self._dt_s
         samples: dict[str, Sequence[Any]] = {}
+        for row in rows:  # the command in force reaches the wheels through the motor driver
+            row.drive, row.wheels_command = drive(row.drive, row.command, row.model.params,
+                                                  dt_s)
         kinematic = [row for row in rows if row.model.mode == "kinematic"]
         dynamic = [row for row in rows if row.model.mode == "dynamic"]
         neighbours = self._neighbours(everyone) if len(everyone) > 1 else {}
         for row in kinematic:  # in turn: each against the others where they stand now
             others = [self._robots[other].model.footprint
                       for other in neighbours.get(row.name, ())]
-            samples[row.name] = row.model.step_kinematic(row.command, dt_s, others)
+            samples[row.name] = row.model.step_kinematic(row.wheels_command, dt_s, others)
         if dynamic:
             for row in everyone:
                 row.model.place_body()  # kinematic and held ones: where they stand
@@ -441,7 +454,7 @@ class WorldSim:
                 row.model.begin_dynamic()
             for _ in range(substeps):
                 for row in dynamic:
-                    row.model.push(row.command, sub_dt)
+                    row.model.push(row.wheels_command, sub_dt)
                 self._space.space.step(sub_dt)
                 for row in dynamic:
                     row.model.note_contacts()
@@ -468,7 +481,7 @@ class WorldSim:
         count = len(rows)
         xy = np.array([(row.model.pose.x, row.model.pose.y) for row in rows])
         radius = np.array([row.model.params.footprint_radius_m for row in rows])
-        moving = np.array([abs(row.command.linear_mps) * self._dt_s
+        moving = np.array([abs(row.wheels_command.linear_mps) * self._dt_s
                            if row.model.mode == "kinematic" and not row.model.held else 0.0
                            for row in rows])
         gap = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])

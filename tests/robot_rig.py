@@ -10,7 +10,8 @@ for each world).
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import cbor2
@@ -39,6 +40,11 @@ class RobotRig:
     host: RobotHost
     clock: ManualClock
     world: WorldHost
+    tick_listeners: list[Callable[[], None]] = field(default_factory=list)
+    """Called after every tick, as the tick driver calls its own (``TickDriver``)."""
+
+    def write(self, flush: Flush) -> None:
+        """The tick driver's write: nothing to write here (frames stay in the outboxes)."""
 
     @property
     def robot(self) -> VirtualRobot:
@@ -63,8 +69,11 @@ class RobotRig:
                            else json.dumps(message))
 
     def tick_now(self, lateness_s: float = 0.0) -> None:
-        """One tick of its world at the clock's present time (the clock is not moved)."""
+        """One tick of its world at the clock's present time (the clock is not moved), then
+        the tick listeners, as the tick driver runs them."""
         self.world.tick(_ignore, lateness_s)
+        for listener in list(self.tick_listeners):
+            listener()
 
     def tick(self, n: int = 1, lateness_s: float = 0.0) -> None:
         """``n`` ticks of its world, the clock moving one tick period (``dt_s``) after each.

@@ -46,7 +46,8 @@ def arena(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[ServerProc
     (folder / "roster.txt").write_text("alice\nbob\ncarol\n")
     links = folder / "links.csv"
     server = start_server(["--class", str(folder / "roster.txt"), "--arena", "--world",
-                           str(folder / "arena.yaml"), "--links", str(links)])
+                           str(folder / "arena.yaml"), "--links", str(links),
+                           "--student-spawn", "1"])
     tokens = {row["name"]: row["token"] for row in csv.DictReader(links.open())}
     yield server, tokens
     server.stop()
@@ -166,3 +167,60 @@ def test_the_instructor_sees_every_robot_of_the_arena(
     for i, a in enumerate(positions):
         for b in positions[i + 1:]:
             assert math.dist(a, b) >= 2 * RADIUS_M, "no two footprints overlap"
+
+
+SRV = "simulation_interfaces/srv/"
+OK, OPERATION_FAILED = 1, 4
+
+
+def spawn_args(name: str, x: float, y: float) -> dict[str, Any]:
+    return {"name": name, "uri": "websim://robot",
+            "initial_pose": {"header": {"frame_id": "map"},
+                             "pose": {"position": {"x": x, "y": y, "z": 0.0},
+                                      "orientation": {"x": 0.0, "y": 0.0, "z": 0.0,
+                                                      "w": 1.0}}}}
+
+
+def test_the_arena_spawns_and_deletes_robots_within_each_callers_rights(
+        arena: tuple[ServerProcess, dict[str, str]]) -> None:
+    server, tokens = arena
+    teacher = Student(server, "alice", ADMIN_TOKEN)
+    carol = Student(server, "carol", tokens["carol"])
+    try:
+        features = teacher.call("/get_simulator_features", SRV + "GetSimulatorFeatures")
+        assert features["features"]["spawn_formats"] == ["websim"]  # the uri scheme
+        spawned = teacher.call("/spawn_entity", SRV + "SpawnEntity",
+                               spawn_args("dave", 2.0, 2.0))
+        assert spawned["result"]["result"] == OK, spawned
+        entities = teacher.call("/get_entities", SRV + "GetEntities", {"filters": {}})
+        assert set(entities["entities"]) == {"alice", "bob", "carol", "dave"}
+        state = teacher.call("/get_entity_state", SRV + "GetEntityState", {"entity": "dave"})
+        assert state["state"]["pose"]["position"]["x"] == pytest.approx(2.0)
+        # dave is a robot of the class: its own page and bridge, its name on /world_robots
+        dave = Student(server, "dave", None)
+        dave.listen("/world_robots", "visualization_msgs/msg/MarkerArray")
+        wait_for(lambda: dave.get("/world_robots"), 20.0, "dave's /world_robots")
+        assert "dave" in {m["text"] for m in dave.get("/world_robots")["markers"]}
+        dave.close()
+        # a student: one robot of their own (--student-spawn 1), where there is room
+        blocked = carol.call("/spawn_entity", SRV + "SpawnEntity", spawn_args("erin", 2.05, 2))
+        assert blocked["result"]["result"] != OK, "dave stands there"
+        mine = carol.call("/spawn_entity", SRV + "SpawnEntity", spawn_args("erin", -2.0, 2.0))
+        assert mine["result"]["result"] == OK, mine
+        second = carol.call("/spawn_entity", SRV + "SpawnEntity", spawn_args("finn", -2, -1))
+        assert second["result"]["result"] == OPERATION_FAILED
+        assert "--student-spawn" in second["result"]["error_message"]
+        theirs = carol.call("/delete_entity", SRV + "DeleteEntity", {"entity": "dave"})
+        assert theirs["result"]["result"] == OPERATION_FAILED, "dave is the instructor's"
+        paused = carol.call("/set_simulation_state", SRV + "SetSimulationState",
+                            {"state": {"state": 2}})
+        assert paused["result"]["result"] == OPERATION_FAILED, "the arena is everyone's"
+        assert carol.call("/delete_entity", SRV + "DeleteEntity",
+                          {"entity": "erin"})["result"]["result"] == OK
+        assert teacher.call("/delete_entity", SRV + "DeleteEntity",
+                            {"entity": "dave"})["result"]["result"] == OK
+        entities = teacher.call("/get_entities", SRV + "GetEntities", {"filters": {}})
+        assert set(entities["entities"]) == {"alice", "bob", "carol"}
+    finally:
+        teacher.close()
+        carol.close()

@@ -21,6 +21,7 @@ from physics import (
     load_world,
 )
 from physics.params import SHIPPED_PARAMS_FILE
+from physics.simulation import SINGLE_ROBOT
 from physics.world import WORLDS_DIR
 from ros_nodes.robot_description import robot_json
 from ros_nodes.sim_clock import MAX_SPEED, MIN_SPEED, SPEED_MAX, SimClock
@@ -167,15 +168,15 @@ def _add_sim_arguments(parser: argparse.ArgumentParser, *, mode: bool = True) ->
     parser.add_argument("--seed", type=int, default=0, help="random seed for noise (default 0)")
 
 
-def make_simulation(args: argparse.Namespace) -> Simulation:
-    """Build the simulation the common arguments describe.
+def make_simulation(args: argparse.Namespace, name: str = SINGLE_ROBOT) -> Simulation:
+    """Build the simulation the common arguments describe, its robot named ``name``.
 
     The world's ``noise`` section, if any, overrides the parameter file's sigmas.
     """
     platform = load_params(args.params)
     world = load_world(args.world)
     return Simulation(world, platform.robot, mode=args.mode, seed=args.seed,
-                      lidar=platform.lidar, noise=world.noise_over(platform.noise))
+                      lidar=platform.lidar, noise=world.noise_over(platform.noise), name=name)
 
 
 def parse_speed(text: str) -> float:
@@ -274,6 +275,11 @@ def _run_serve(args: argparse.Namespace) -> int:
     recorder = serve_command.recorder_from(args)
     if args.arena and args.class_spec is None:
         raise ConfigError("--arena puts a class's robots in one world: it needs --class")
+    if args.student_spawn and not args.arena:
+        raise ConfigError("--student-spawn is for an arena: it needs --class and --arena")
+    if not 0 <= args.student_spawn <= MAX_STUDENT_SPAWN:
+        raise ConfigError(f"--student-spawn: from 0 to {MAX_STUDENT_SPAWN}, got "
+                          f"{args.student_spawn}")
     if args.class_spec is None:
         robot = VirtualRobot(make_simulation(args), clock, localization=args.localization)
         site = sites.single_robot(robot, token, limits, origins,
@@ -285,6 +291,10 @@ def _run_serve(args: argparse.Namespace) -> int:
     return serve_command.run(args, sites.classroom_site(
         args, make_robot, (platform.robot, platform.lidar), token, limits, origins, clock,
         recorder), token)
+
+
+MAX_STUDENT_SPAWN = 20
+"""Most robots one student may have spawned into an arena at once (``--student-spawn``)."""
 
 
 def class_robots(args: argparse.Namespace, clock: Clock) -> Callable[[Student], VirtualRobot]:
@@ -301,7 +311,8 @@ def class_robots(args: argparse.Namespace, clock: Clock) -> Callable[[Student], 
     def make_robot(student: Student) -> VirtualRobot:
         world = args.world if student.world is None else student.world
         return VirtualRobot(make_simulation(argparse.Namespace(**{**vars(args),
-                                                                 "world": world})),
+                                                                 "world": world}),
+                                            student.name),
                             robot_clock(), localization=args.localization)
 
     return make_robot
@@ -330,7 +341,8 @@ def arena_robots(args: argparse.Namespace, clock: Clock) -> Callable[[Student], 
             raise ConfigError(f"robot '{student.name}': the roster gives it the world "
                               f"'{student.world}', but --arena puts every robot in --world")
         placed = world.placed(student.name)
-        arena.spawn(student.name, None if placed is None else placed.start,
+        start = student.start or (None if placed is None else placed.start)
+        arena.spawn(student.name, start,
                     platform.robot if placed is None else placed.params_over(platform.robot),
                     mode=args.mode)
         return VirtualRobot(Simulation.of(arena, student.name), clock,

@@ -123,6 +123,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "they see each other (LiDAR) and collide; a robot the world "
                              "file places (its robots: list) starts there, the others at the "
                              "nearest free place to its start; see docs/arena.md")
+    parser.add_argument("--student-spawn", type=int, default=0, metavar="N",
+                        help="with --arena: a student may spawn up to N robots of their own "
+                             "into the arena (simulation_interfaces' SpawnEntity, turtlesim's "
+                             "/spawn) and delete them (default 0: only the instructor spawns)")
     parser.add_argument("--open-drive", action="store_true",
                         help="with --class: any connection may drive and reset any robot "
                              "(default: only with the robot's token or the instructor's; "

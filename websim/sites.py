@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import io
 import json
 import os
@@ -34,8 +35,9 @@ from ros_nodes.robot_description import robot_json
 from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
 from ros_nodes.robot_interface import ROBOTS_PREFIX
 from ros_nodes.simulation_services import SimulationServices, add_simulation_services
-from ros_nodes.simulator_control import OneRobotWorld
+from ros_nodes.simulator_control import OneRobotWorld, SharedWorld
 from ros_nodes.virtual_robot_core import VirtualRobot
+from ros_nodes.world_host import WorldHost
 from rosbridge.core.clock import Clock
 from rosbridge.core.limits import ClientLimits, LatchedBytes, OriginPolicy
 from rosbridge.transport.front import WebSocketFront
@@ -174,8 +176,8 @@ def single_robot(robot: VirtualRobot, token: str, limits: ClientLimits,
         recorder: records the robot (``--record``); None: nothing is recorded.
     """
     server = SimServer(robot, token, limits=limits, origins=origins)
-    simulation = add_simulation_services(server.bridge,
-                                         OneRobotWorld(server.host, SINGLE_ROBOT_NAME))
+    simulation = add_simulation_services(
+        server.bridge, OneRobotWorld(server.world, robot.sim.name, server.driver))
     site = Site(server, robot=robot, ws_port=ws_port, recorder=recorder,
                 headline=f"world '{robot.sim.world.name}', {robot.sim.mode} mode",
                 simulation=simulation)
@@ -225,7 +227,10 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
                               max_robots=args.max_robots, idle_pause_s=args.idle_pause,
                               lazy=args.worker, clock=clock, state=state,
                               latched=LatchedBytes.for_server(limits),
-                              recorder=recorder, on_robot=simulated)
+                              recorder=recorder,
+                              on_robot=functools.partial(
+                                  simulated, getattr(args, "arena", False),
+                                  getattr(args, "student_spawn", 0)))
     except BaseException:
         state.close()
         raise
@@ -263,12 +268,17 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
     return site
 
 
-def simulated(name: str, host: RobotHost) -> None:
-    """A class robot's world of its own, with the simulation services over it.
+def simulated(arena: bool, spawn_quota: int, classroom: Classroom, name: str,
+              host: RobotHost, world: WorldHost) -> None:
+    """A class robot's simulation services, over its world.
 
-    ``simulation_interfaces`` and turtlesim's names (``ros_nodes.simulation_services``).
+    ``simulation_interfaces`` and turtlesim's names (``ros_nodes.simulation_services``): over
+    the robot's world of its own, or over the arena every robot shares (``--arena``), where
+    the class spawns and deletes robots and a student may spawn ``spawn_quota`` of them.
     """
-    add_simulation_services(host.bridge, OneRobotWorld(host, name))
+    control = SharedWorld(world, name, classroom.driver, classroom, spawn_quota) if arena \
+        else OneRobotWorld(world, name, classroom.driver)
+    add_simulation_services(host.bridge, control)
 
 
 def public_host(bind: str) -> str:

@@ -168,6 +168,9 @@ class Session:
         self.peer = peer
         self.namespace = namespace
         self.is_admin = is_admin
+        self.server_admin = False
+        """Whether its admin rights are the server's (its admin token: every bridge of the
+        server), not only this bridge's (a robot's own token). Set by the transport."""
         self.may_drive = may_drive
         """Whether it may change the robot, not only watch (``access.DriveRules``)."""
         self.url_path = "/"

@@ -269,6 +269,7 @@ class WebSocketFront(abc.ABC):
             client = BridgeConnection(host.bridge, host.pace, connection, peer, is_admin,
                                       self.limits, self.wire, self.clock, budget, robot_budget)
             client.session.may_drive = self.may_drive(name, is_admin)
+            client.session.server_admin = self.is_admin_token(token)
             client.session.url_path = target.path
             await client.run()
         finally:
