@@ -47,7 +47,7 @@ from physics.command_pipeline import AT_REST, drive
 from physics.frames import map_to_odom
 from physics.geometry import WorldShapes, world_shapes
 from physics.kinematics import clamp_command
-from physics.lidar import NO_DISCS, Lidar, ScanRequest, scan_many
+from physics.lidar import Lidar, ScanRequest, scan_many
 from physics.odometry import OdometryIntegrator
 from physics.params import LidarParams, NoiseParams, RobotParams
 from physics.robot import MODES, Disc, MobileRobotPhysics, dynamic_substeps
@@ -155,6 +155,7 @@ class WorldSim:
         self._version = 0
         """Moves on whenever a robot moves, appears or goes: what scans are cached against."""
         self._footprints: tuple[int, FloatArray] | None = None
+        self._indices: dict[str, int] = {}
         self._bodies_placed = -1
         self.paused = False
 
@@ -266,6 +267,7 @@ class WorldSim:
                      self._noise if noise is None else noise, pose,
                      RobotSeed.of(self._seed, name) if seed is None else seed, self._tick)
         self._robots[name] = row
+        self._indices = {}
         self._moved()
         return pose
 
@@ -274,6 +276,7 @@ class WorldSim:
         row = self._row(name)
         row.model.remove()
         del self._robots[name]
+        self._indices = {}
         self._moved()
 
     def spawn_pose(self, name: str) -> Pose2D:
@@ -475,22 +478,25 @@ class WorldSim:
         """For each kinematic robot, the robots it could touch this tick (one array pass).
 
         Robot i can reach robot j within a tick only if their centres are closer than
-        r_i + r_j plus the distance both may move in it (a kinematic robot moves its
+        r_i + r_j plus the distance both may move in it (a kinematic robot moves its wheels'
         command's |v| dt; a dynamic one moves after the kinematic ones, so not yet).
         """
-        count = len(rows)
-        xy = np.array([(row.model.pose.x, row.model.pose.y) for row in rows])
-        radius = np.array([row.model.params.footprint_radius_m for row in rows])
         moving = np.array([abs(row.wheels_command.linear_mps) * self._dt_s
                            if row.model.mode == "kinematic" and not row.model.held else 0.0
                            for row in rows])
-        gap = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
-        reach = radius[:, None] + radius[None, :] + moving[:, None] + moving[None, :] + \
-            REACH_SLACK_M
-        close = (gap < reach) & ~np.eye(count, dtype=bool) & (moving[:, None] > 0.0)
+        movers = np.nonzero(moving > 0.0)[0]
+        if not len(movers):
+            return {}
+        discs = self.footprints()  # rows are every robot, in spawn order: the same order
+        gap_x = discs[movers, None, 0] - discs[None, :, 0]
+        gap_y = discs[movers, None, 1] - discs[None, :, 1]
+        reach = discs[movers, None, 2] + discs[None, :, 2] + moving[movers, None] + \
+            moving[None, :] + REACH_SLACK_M
+        close = gap_x * gap_x + gap_y * gap_y < reach * reach
+        close[np.arange(len(movers)), movers] = False
         found: dict[str, list[str]] = {}
         for i, j in zip(*np.nonzero(close), strict=True):
-            found.setdefault(rows[i].name, []).append(rows[j].name)
+            found.setdefault(rows[movers[i]].name, []).append(rows[j].name)
         return found
 
     def _moved(self) -> None:
@@ -514,18 +520,20 @@ class WorldSim:
         return np.array([tuple(row.model.pose) for row in self._robots.values()],
                         dtype=np.float64).reshape(-1, 3)
 
-    def others(self, name: str) -> FloatArray:
-        """The footprints of every robot but ``name``: what its LiDAR sees besides the walls."""
-        if len(self._robots) < 2:
-            return NO_DISCS
-        index = list(self._robots).index(name)
-        return np.delete(self.footprints(), index, axis=0)
-
     def scan_request(self, name: str) -> ScanRequest:
-        """This tick's scan of robot ``name`` to cast (``physics.lidar.scan_many``)."""
+        """This tick's scan of robot ``name`` to cast (``physics.lidar.scan_many``).
+
+        It sees every robot of the world but itself.
+        """
         row = self._row(name)
         return ScanRequest(row.lidar, row.model.pose, self._scan_rng(row), row.noise.scan_sigma_m,
-                           self.others(name))
+                           self.footprints(), self._index(name))
+
+    def _index(self, name: str) -> int:
+        """Robot ``name``'s row in ``footprints`` and ``poses``."""
+        if not self._indices:  # made again after a robot came or went
+            self._indices = {other: row for row, other in enumerate(self._robots)}
+        return self._indices[name]
 
     def scan(self, name: str) -> LaserScan:
         """Robot ``name``'s LiDAR scan now, the other robots seen (computed once per tick)."""
