@@ -38,7 +38,7 @@ import pymunk
 
 from physics.geometry import WorldShapes
 from physics.params import LidarParams
-from physics.raycast import cast
+from physics.raycast import cast, cast_one
 from physics.snapshots import LaserScan, Pose2D
 from physics.space import WALLS_ONLY, WorldSpace
 
@@ -120,8 +120,14 @@ class Lidar:
 
         The walls and obstacles, and ``discs`` (other robots: rows of x, y, radius).
         """
-        ranges: FloatArray = self.raw_ranges_many([robot_pose], discs)[0]
-        return ranges
+        if len(discs):
+            ranges: FloatArray = self.raw_ranges_many([robot_pose], discs)[0]
+            return ranges
+        laser = self.laser_pose(robot_pose)
+        shapes = self._shapes
+        return cast_one(laser.x, laser.y, laser.theta, self.beam_cos, self.beam_sin,
+                        self._params.range_max_m, shapes.walls, shapes.circle_centre,
+                        shapes.circle_radius)
 
     def raw_ranges_many(self, robot_poses: Sequence[Pose2D],
                         discs: FloatArray = NO_DISCS,
@@ -158,8 +164,16 @@ class Lidar:
     def finish(self, raw_ranges_m: FloatArray, rng: np.random.Generator | None,
                sigma_m: float) -> FloatArray:
         """Turn raw distances into reported ranges: noise, too-close and no-return values."""
-        finished: FloatArray = self.finish_many(raw_ranges_m[None], [rng], [sigma_m])[0]
-        return finished
+        p = self._params
+        ranges = raw_ranges_m.copy()
+        hit = np.isfinite(ranges)
+        if sigma_m > 0.0 and rng is not None:
+            noisy = ranges + rng.normal(0.0, sigma_m, size=ranges.shape)
+            ranges = np.where(hit, np.clip(noisy, 0.0, p.range_max_m), ranges)
+        too_close = hit & (ranges < p.range_min_m)
+        ranges[too_close] = -np.inf if p.no_return == "inf" else TOO_CLOSE_COURSE_M
+        ranges[~hit] = p.no_return_range_m
+        return ranges  # type: ignore[no-any-return]
 
     def finish_many(self, raw_ranges_m: FloatArray,
                     rngs: Sequence[np.random.Generator | None],
@@ -234,6 +248,14 @@ def scan_many(requests: Sequence[ScanRequest]) -> list[LaserScan]:
     from its own stream, so each scan is what ``Lidar.scan`` gives it alone (to rounding,
     ~1e-15 m).
     """
+    if len(requests) == 1:  # a robot's own scan (its world's others among its discs)
+        request = requests[0]
+        lidar = request.lidar
+        if len(request.discs):
+            raws = lidar.raw_ranges_many([request.robot_pose], request.discs, [request.own])
+        else:
+            raws = lidar.raw_ranges(request.robot_pose)[None]
+        return lidar.scans_from_raw(raws, [request.rng], [request.sigma_m])
     alike: dict[Any, list[int]] = {}
     for index, request in enumerate(requests):
         alike.setdefault(request.lidar.geometry_key, []).append(index)

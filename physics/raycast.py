@@ -157,23 +157,22 @@ def _dense(ranges: FloatArray, origins: FloatArray, cos_t: FloatArray, sin_t: Fl
     For few lasers and shapes: numpy's cost per call, not the arithmetic, is the price there,
     and fewer calls win.
     """
+    if len(origins) == 1:
+        _dense_one(ranges[0], float(origins[0, 0]), float(origins[0, 1]), float(cos_t[0]),
+                   float(sin_t[0]), beam_cos, beam_sin, walls, centre, radius,
+                   -1 if skip is None else int(skip[0]))
+        return
     dir_x = cos_t[:, None] * beam_cos - sin_t[:, None] * beam_sin  # lasers x beams
     dir_y = sin_t[:, None] * beam_cos + cos_t[:, None] * beam_sin
     count = len(walls)
     if count:
         # the three cross products d x e, d x (a - o), d x (b - o) in one matrix product
         edge = walls.edge
-        if len(origins) == 1:
-            ox, oy = float(origins[0, 0]), float(origins[0, 1])
-            rows = walls.rows - walls.moves * np.array((oy, -ox))
-            products = (rows @ np.stack((dir_x[0], dir_y[0])))[None]  # 1 x 3W x beams
-            numerator = (walls.a_cross_e[:, 0] - (ox * edge[:, 1] - oy * edge[:, 0]))[None]
-        else:
-            shift = np.stack((origins[:, 1], -origins[:, 0]), axis=1)[:, None, :]
-            rows = walls.rows[None] - walls.moves[None] * shift  # lasers x 3W x 2
-            products = rows @ np.stack((dir_x, dir_y), axis=1)  # lasers x 3W x beams
-            numerator = walls.a_cross_e[None, :, 0] - (origins[:, :1] * edge[None, :, 1]
-                                                       - origins[:, 1:] * edge[None, :, 0])
+        shift = np.stack((origins[:, 1], -origins[:, 0]), axis=1)[:, None, :]
+        rows = walls.rows[None] - walls.moves[None] * shift  # lasers x 3W x 2
+        products = rows @ np.stack((dir_x, dir_y), axis=1)  # lasers x 3W x beams
+        numerator = walls.a_cross_e[None, :, 0] - (origins[:, :1] * edge[None, :, 1]
+                                                   - origins[:, 1:] * edge[None, :, 0])
         denom = products[:, :count]
         with np.errstate(divide="ignore", invalid="ignore"):
             t = numerator[:, :, None] / denom
@@ -203,6 +202,53 @@ def _directions(laser: IntArray, beam: IntArray, cos_t: FloatArray, sin_t: Float
     c, s = cos_t[laser], sin_t[laser]
     bc, bs = beam_cos[beam], beam_sin[beam]
     return c * bc - s * bs, s * bc + c * bs
+
+
+def cast_one(ox: float, oy: float, theta: float, beam_cos: FloatArray, beam_sin: FloatArray,
+             range_max_m: float, walls: Walls, disc_centre: FloatArray,
+             disc_radius: FloatArray) -> FloatArray:
+    """``cast`` of one laser at (ox, oy) with yaw ``theta``: the distances along its beams.
+
+    What a robot alone in its world casts every scan, without the batch's bookkeeping.
+    """
+    ranges = np.full(len(beam_cos), np.inf)
+    _dense_one(ranges, ox, oy, math.cos(theta), math.sin(theta), beam_cos, beam_sin, walls,
+               disc_centre, disc_radius, -1)
+    ranges[ranges > range_max_m] = np.inf
+    return ranges
+
+
+def _dense_one(ranges: FloatArray, ox: float, oy: float, cos_t: float, sin_t: float,
+               beam_cos: FloatArray, beam_sin: FloatArray, walls: Walls, centre: FloatArray,
+               radius: FloatArray, skip: int) -> None:
+    """``_dense`` of one laser at (ox, oy) turned (cos_t, sin_t): the single robot's scan."""
+    dir_x = cos_t * beam_cos - sin_t * beam_sin
+    dir_y = sin_t * beam_cos + cos_t * beam_sin
+    count = len(walls)
+    if count:
+        edge = walls.edge
+        products = (walls.rows - walls.moves * np.array((oy, -ox))) @ np.stack((dir_x, dir_y))
+        denom = products[:count]
+        numerator = walls.a_cross_e - (ox * edge[:, 1:] - oy * edge[:, :1])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = numerator / denom
+        missed = (products[count:2 * count] * products[2 * count:] > 0.0) | ~(t >= 0.0) | \
+            (np.abs(denom) < PARALLEL_EPS)
+        t[missed] = np.inf
+        np.minimum(ranges, t.min(axis=0), out=ranges)
+    if len(radius):
+        to_x = (centre[:, 0] - ox)[:, None]
+        to_y = (centre[:, 1] - oy)[:, None]
+        outside = to_x * to_x + to_y * to_y - (radius * radius)[:, None]
+        if skip >= 0:
+            outside[skip] = np.nan  # never seen: every test fails
+        along = to_x * dir_x + to_y * dir_y
+        discriminant = along * along - outside
+        t = along - np.sqrt(np.maximum(discriminant, 0.0))
+        within = outside <= 0.0
+        t = np.where(within, 0.0, t)
+        hit = within | ((discriminant >= 0.0) & (t >= 0.0))
+        np.minimum(ranges, np.where(hit, t, np.inf).min(axis=0), out=ranges)
 
 
 def _walls(ranges: FloatArray, origins: FloatArray, cos_t: FloatArray, sin_t: FloatArray,

@@ -432,6 +432,9 @@ class WorldSim:
             self._step_once()
 
     def _step_once(self) -> None:
+        if len(self._robots) == 1:
+            self._step_alone(next(iter(self._robots.values())))
+            return
         everyone = list(self._robots.values())
         rows = [row for row in everyone if not row.model.held]
         for row in everyone:
@@ -464,15 +467,31 @@ class WorldSim:
             for row in dynamic:
                 samples[row.name] = row.model.end_dynamic()
         for row in rows:
-            noise = row.noise
-            v_noise = row.draw_noise(noise.odom_linear_sigma_mps)
-            omega_noise = row.draw_noise(noise.odom_angular_sigma_rps)
-            row.odometry.integrate(samples[row.name], v_noise, omega_noise)
-            params = row.model.params
-            row.wheels.integrate(samples[row.name], params.half_wheelbase_m,
-                                 params.wheel_radius_m, v_noise, omega_noise)
+            self._integrate(row, samples[row.name])
         self._tick += 1
         self._moved()
+
+    def _step_alone(self, row: _Robot) -> None:
+        """``_step_once`` of a world of one robot: the same steps, nobody else to meet."""
+        if row.model.held:
+            row.start_tick += 1
+        else:
+            row.drive, row.wheels_command = drive(row.drive, row.command, row.model.params,
+                                                  self._dt_s)
+            self._integrate(row, row.model.step(row.wheels_command, self._dt_s))
+        self._tick += 1
+        self._version += 1  # ``_moved``
+
+    @staticmethod
+    def _integrate(row: _Robot, samples: Sequence[Any]) -> None:
+        """A tick's encoder samples into a robot's odometry and wheels, with its noise."""
+        noise = row.noise
+        v_noise = row.draw_noise(noise.odom_linear_sigma_mps)
+        omega_noise = row.draw_noise(noise.odom_angular_sigma_rps)
+        row.odometry.integrate(samples, v_noise, omega_noise)
+        params = row.model.params
+        row.wheels.integrate(samples, params.half_wheelbase_m, params.wheel_radius_m,
+                             v_noise, omega_noise)
 
     def _neighbours(self, rows: list[_Robot]) -> dict[str, list[str]]:
         """For each kinematic robot, the robots it could touch this tick (one array pass).
@@ -526,6 +545,9 @@ class WorldSim:
         It sees every robot of the world but itself.
         """
         row = self._row(name)
+        if len(self._robots) == 1:  # alone in its world: no other robot to see
+            return ScanRequest(row.lidar, row.model.pose, self._scan_rng(row),
+                               row.noise.scan_sigma_m)
         return ScanRequest(row.lidar, row.model.pose, self._scan_rng(row), row.noise.scan_sigma_m,
                            self.footprints(), self._index(name))
 
@@ -538,10 +560,15 @@ class WorldSim:
     def scan(self, name: str) -> LaserScan:
         """Robot ``name``'s LiDAR scan now, the other robots seen (computed once per tick)."""
         row = self._row(name)
-        if row.scan_cache is None or row.scan_cache[0] != self._version:
-            self.accept_scan(name, scan_many([self.scan_request(name)])[0])
-        assert row.scan_cache is not None
-        return row.scan_cache[1]
+        cache = row.scan_cache
+        if cache is not None and cache[0] == self._version:
+            return cache[1]
+        if len(self._robots) == 1:  # alone: its LiDAR against the walls, nothing else
+            scan = row.lidar.scan(row.model.pose, self._scan_rng(row), row.noise.scan_sigma_m)
+        else:
+            scan = scan_many([self.scan_request(name)])[0]
+        row.scan_cache = (self._version, scan)
+        return scan
 
     def scan_is_current(self, name: str) -> bool:
         """Whether robot ``name``'s scan of this tick has been cast already."""
