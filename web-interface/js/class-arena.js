@@ -6,14 +6,11 @@
 
 import { applyMarkerArray, markerBounds, robotsFromMarkers } from './ros-msgs.js';
 import { namespaced } from './class-plan.js';
-import { fitCamera } from './class-view.js';
+import { fitCamera, paintRobot } from './class-view.js';
 import { COLORS, paintWalls } from './view.js';
 
 const ROBOTS_THROTTLE_MS = 100;
 const PAD_PX = Object.freeze({ top: 8, right: 8, bottom: 8, left: 8 });
-const MIN_ROBOT_PX = 4;
-const OUTLINE_PX = 1.25;
-const HEADING_PX = 2;
 const LABEL_GAP_PX = 4;
 
 /** The arena's state: its walls and its robots, as the messages left them. */
@@ -79,20 +76,7 @@ export class ArenaMap {
     ctx.textAlign = 'center';
     for (const other of state.robots) {
       const [cx, cy] = toScreen(other.x, other.y);
-      const r = Math.max(other.radius * camera.scale, MIN_ROBOT_PX);
-      ctx.beginPath();
-      ctx.arc(cx, cy, r, 0, 2 * Math.PI);
-      ctx.fillStyle = COLORS.robotFill;
-      ctx.fill();
-      ctx.lineWidth = OUTLINE_PX;
-      ctx.strokeStyle = COLORS.robot;
-      ctx.stroke();
-      ctx.beginPath();
-      ctx.moveTo(cx, cy);
-      ctx.lineTo(cx + r * Math.cos(other.yaw), cy - r * Math.sin(other.yaw)); // y flips
-      ctx.lineWidth = HEADING_PX;
-      ctx.strokeStyle = COLORS.heading;
-      ctx.stroke();
+      const r = paintRobot(ctx, cx, cy, other.radius * camera.scale, other.yaw);
       ctx.fillStyle = COLORS.text;
       ctx.fillText(other.name, cx, cy - r - LABEL_GAP_PX);
     }
