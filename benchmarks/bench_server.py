@@ -704,7 +704,8 @@ def run_one(n_clients: int, window_s: float, seed: int, log_dir: Path,
     if reader_processes is None:
         reader_processes = reader_processes_for(n_clients)
     with running_server(log_dir, ["--max-clients", str(n_clients + SPARE_CLIENTS),
-                                  *server_args]) as server:
+                                  "--max-connections-per-address",
+                                  str(n_clients + SPARE_CLIENTS), *server_args]) as server:
         try:
             return asyncio.run(asyncio.wait_for(
                 measure(server, n_clients, window_s, seed, reader_processes),

@@ -21,11 +21,12 @@ from typing import Any
 
 from classroom.instructor_view import InstructorView
 from classroom.registry import ROBOT_NAME, Classroom
+from physics import ConfigError
 from ros_nodes.robot_interface import ROBOTS_PREFIX
 from rosbridge.core.limits import ClientLimits, OriginPolicy
 from rosbridge.transport.connection import Hub
 from rosbridge.transport.front import Destination, WebSocketFront
-from rosbridge.transport.schedule import Schedule
+from rosbridge.transport.writers import Pace
 
 ROOT_REFUSAL = ("this server hosts a class: connect to ws://HOST:PORT/robots/NAME for robot "
                 "NAME (ws://HOST:PORT/ is the instructor's view of every robot: it needs "
@@ -82,10 +83,13 @@ class ClassServer(WebSocketFront):
         if isinstance(found, str):
             return found
         _, name = found
-        host = self.classroom.get(name or "")
+        try:
+            host = self.classroom.get(name or "")
+        except ConfigError as error:  # a robot that cannot be made (no room in an arena)
+            return str(error)
         if host is None:
             return self.why_unknown(name or "")
-        return host, name
+        return Destination(host.bridge, self.classroom.pace(name or "")), name
 
     def find(self, path: str) -> tuple[Destination | None, str | None] | str:
         """Robot NAME of ``/robots/NAME``, made by nobody.
@@ -112,7 +116,7 @@ class ClassServer(WebSocketFront):
     def _hosted(self, name: str) -> Destination | None:
         for hosted, host in self.classroom:
             if hosted == name:
-                return host
+                return Destination(host.bridge, self.classroom.pace(name))
         return None
 
     def why_unknown(self, name: str) -> str:
@@ -167,11 +171,15 @@ class ClassServer(WebSocketFront):
         return class_view_limits(self.limits, max(len(self.classroom),
                                                   self.classroom.max_robots))
 
-    def root_view(self, path: str, token: str | None) -> tuple[Hub, Schedule] | None:
-        """The instructor's view of every robot, at ``/`` with the instructor's token."""
+    def root_view(self, path: str, token: str | None) -> tuple[Hub, Pace] | None:
+        """The instructor's view of every robot, at ``/`` with the instructor's token.
+
+        Its pace is the class's shared one: above real time no robot waits for it (a view of
+        the whole class that cannot keep up gets the newest of each topic).
+        """
         if path.startswith(ROBOTS_PREFIX) or not self.is_admin_token(token):
             return None
-        return InstructorView(self.classroom), self.classroom.schedule
+        return InstructorView(self.classroom), self.classroom.driver.shared
 
     def wrong_root_token(self, path: str, token: str | None) -> str | None:
         """A token at the instructor's root that is not the instructor's: 403, not 404."""
@@ -204,14 +212,17 @@ class ClassServer(WebSocketFront):
         ``full`` False (public, without the instructor's token): counts only, no robot's
         name (``robots`` and ``degraded_robots`` left out).
         """
-        robots = {name: host.health() for name, host in self.classroom}
+        driver = self.classroom.driver
+        robots = {name: host.health(driver.report(self.classroom.world(name)))
+                  for name, host in self.classroom}
         degraded = [name for name, report in robots.items() if report["status"] != "ok"]
         report = {
             "status": "degraded" if degraded else "ok",
             "degraded_robots": degraded,
             "degraded_count": len(degraded),
             "uptime_s": self._uptime_s(),
-            "ticks_due": self.classroom.schedule.ticks_due(),
+            "ticks_due": max((report["ticks_due"] for report in robots.values()),
+                             default=driver.shared.ticks_due()),
             "robot_count": len(robots),
             "paused_robots": sum(1 for report in robots.values() if report["paused"]),
             "clients": sum(report["clients"] for report in robots.values()),

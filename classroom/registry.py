@@ -2,8 +2,10 @@
 
 ``Classroom`` is the one registry of tenants (STYLE 16): it creates a ``RobotHost`` (its
 simulation, bridge and token) per roster entry, or on first connection in an open class,
-and nothing of one robot is reachable from another's objects. All robots follow one tick
-``Schedule``; a robot nobody has been connected to for the idle time stops ticking.
+and nothing of one robot is reachable from another's objects: each student's robot lives in
+a world of its own (``ros_nodes.world_host.WorldHost``). The class's one tick driver
+(``heartbeat.driver.TickDriver``) ticks every world; a robot nobody has been connected to for
+the idle time stops ticking.
 
 Roster files: one student a line, ``name`` or ``name,world`` or ``name,world,token``
 (names ``[a-z0-9_-]{1,32}``; an empty world field means the server's ``--world``); ``#``
@@ -26,18 +28,19 @@ from pathlib import Path
 from typing import Any
 
 from classroom.state import DEFAULT_ENROLMENT_HOURS, SAVE_INTERVAL_S, ClassState
-from physics import TICK_PERIOD_S, ConfigError, load_world
+from heartbeat.driver import TickDriver
+from heartbeat.schedule import Schedule
+from physics import ConfigError, load_world
 from physics.snapshots import Pose2D
 from physics.validation import read_text_file
 from ros_nodes.recording import Recorder
 from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
 from ros_nodes.robot_services import require_admin
-from ros_nodes.sensors import Sensor
 from ros_nodes.virtual_robot_core import VirtualRobot
-from rosbridge.core.clock import Clock, SimClock, WallClock
+from ros_nodes.world_host import WorldHost
+from rosbridge.core.clock import Clock, WallClock
 from rosbridge.core.limits import ClientLimits, LatchedBytes
 from rosbridge.core.session import Session
-from rosbridge.transport.schedule import Schedule
 
 ROBOT_NAME = re.compile(r"[a-z0-9_-]{1,32}")
 """What a robot (student) name may be: it becomes a URL path segment and a ROS namespace."""
@@ -47,15 +50,6 @@ DEFAULT_MAX_ROBOTS = 200
 
 DEFAULT_IDLE_PAUSE_S = 600.0
 """A robot nobody has been connected to for this long stops ticking (``--idle-pause``)."""
-
-SPREAD = 0.8
-"""Share of the tick period the robots' ticks are spread over (the last robot steps 40 ms
-after the first at 20 Hz, leaving the rest of the period for the frames to go out)."""
-
-SLOTS = 10
-"""The spread's slots per period: robots are ticked in up to this many groups, one group every
-``SPREAD / SLOTS`` of the period (4 ms at 20 Hz). A robot's frames go out after its group, not
-after the whole class; and the event loop wakes ten times a tick, not once per robot."""
 
 TOKEN_BYTES = 18
 """Bytes of a robot token (24 URL-safe characters)."""
@@ -83,11 +77,14 @@ class Student:
         name: the robot's name (``[a-z0-9_-]{1,32}``): ``/robots/NAME``.
         world: a world for this robot (file or shipped name); None: the server's.
         token: the robot's own admin token; None: a random one is made.
+        start: where it spawns in a shared world (a robot spawned while the arena runs);
+            None: where the world places it.
     """
 
     name: str
     world: str | None = None
     token: str | None = None
+    start: Pose2D | None = None
 
 
 def check_name(name: str, where: str = "robot name") -> str:
@@ -187,8 +184,10 @@ class Classroom:
 
     Args:
         roster: the students known at start.
-        make_robot: builds a student's robot (its world, the server's parameters).
-        schedule: the tick schedule all robots follow.
+        make_robot: builds a student's robot (its world, the server's parameters): in a world
+            of its own, or in the one world every robot shares (``--arena``): robots whose
+            simulations are of one ``WorldSim`` are ticked as one world.
+        driver: the tick driver of every robot (default: one of its own, on ``clock``).
         open_class: enrol unknown names on their first connection.
         max_robots: most robots an open class holds.
         idle_pause_s: a robot nobody has been connected to for this long pauses.
@@ -196,35 +195,37 @@ class Classroom:
             from the class secret).
         lazy: create a robot on its first ``get`` rather than at start (a worker of a class
             spread over several processes hosts only the robots routed to it).
-        clock: the class's clock (the one its robots are made with): its monotonic time
-            places the groups' ticks within a period. Default: wall time.
+        clock: the class's clock (its monotonic time: idle times, saves; its speed, if a
+            ``SimClock``, the driver's when none is given). Default: wall time.
         state: the class's state file: its secret, enrolments and robots' state, restored
             now and saved every ``SAVE_INTERVAL_S`` while ``run_ticks`` runs. None: a random
             secret, nothing kept.
         latched: the server's pool of clients' latched messages, each robot's within it
             (default: one of the default sizes).
         recorder: records every robot from its creation on (``--record``); None: none.
-        on_robot: called with (name, host) of each robot once it is made (``websim serve``
-            adds its simulation services: ``ros_nodes.simulation_services``).
+        on_robot: called with (the class, name, host, its world's host) of each robot once
+            it is made (``websim serve`` adds its simulation services:
+            ``ros_nodes.simulation_services``).
         enrolment_hours: an open class's enrolment nobody connected to for this long is
             forgotten when the class starts (with its robot's state): its name enrols anew.
     """
 
     def __init__(self, roster: list[Student], make_robot: Callable[[Student], VirtualRobot],
-                 schedule: Schedule | None = None, *, open_class: bool = False,
+                 driver: TickDriver | None = None, *, open_class: bool = False,
                  max_robots: int = DEFAULT_MAX_ROBOTS,
                  idle_pause_s: float | None = DEFAULT_IDLE_PAUSE_S,
                  make_token: Callable[[str], str] | None = None, lazy: bool = False,
                  clock: Clock | None = None, state: ClassState | None = None,
                  latched: LatchedBytes | None = None,
                  recorder: Recorder | None = None,
-                 on_robot: Callable[[str, RobotHost], Any] | None = None,
+                 on_robot: Callable[[Classroom, str, RobotHost, WorldHost], Any] | None = None,
                  enrolment_hours: float = DEFAULT_ENROLMENT_HOURS) -> None:
         self._recorder = recorder
         self._on_robot = on_robot
         self.clock: Clock = WallClock() if clock is None else clock
-        """The class's one clock (its robots' too)."""
-        self.schedule = schedule or Schedule(TICK_PERIOD_S, self.clock)
+        """The class's clock (wall time for intervals; its robots' stamps are their worlds')."""
+        self.driver = driver or TickDriver.for_clock(self.clock)
+        """The one tick driver of every robot of the class."""
         self.open_class = open_class
         self.max_robots = max(max_robots, len(roster))
         self.state = state
@@ -235,6 +236,13 @@ class Classroom:
         self._idle_pause_s = idle_pause_s
         self._make_token = make_token or (lambda name: derived_token(self.secret, name))
         self._hosts: dict[str, RobotHost] = {}
+        self._worlds: dict[str, WorldHost] = {}
+        self._shared: dict[int, WorldHost] = {}
+        """Each world's host, by its simulation: robots made in one world (``--arena``)
+        share it."""
+        self._spawned: dict[str, str | None] = {}
+        """Robots spawned while the class runs (``spawn``), and who spawned each (None: the
+        instructor)."""
         self._tokens: dict[str, str] = {}
         roster_names = {student.name for student in roster}
         self.forgotten: list[str] = [] if state is None else state.forget_enrolments(
@@ -265,9 +273,16 @@ class Classroom:
                     self._enrol(self.students[name])
 
     def _enrol(self, student: Student) -> RobotHost:
-        host = RobotHost(self._make_robot(student), self.schedule, self._idle_pause_s,
-                         self._latched.for_robot())
+        robot = self._make_robot(student)
+        world = self._shared.get(id(robot.sim.world_sim))
+        if world is None:  # a world of its own (or the first robot of a shared one)
+            world = WorldHost(robot.sim.world_sim, self._idle_pause_s)
+            self._shared[id(robot.sim.world_sim)] = world
+        host = world.add(robot, self._latched.for_robot())
+        if len(world) == 1:
+            self.driver.add(world)
         self._hosts[student.name] = host
+        self._worlds[student.name] = world
         self.students[student.name] = student
         self.token(student.name)
         name = student.name
@@ -287,7 +302,7 @@ class Classroom:
         if self._recorder is not None:
             host.recording = self._recorder.record(name, host.robot)
         if self._on_robot is not None:
-            self._on_robot(name, host)
+            self._on_robot(self, name, host, world)
         return host
 
     def __iter__(self) -> Iterator[tuple[str, RobotHost]]:
@@ -295,6 +310,65 @@ class Classroom:
 
     def __len__(self) -> int:
         return len(self._hosts)
+
+    def spawn(self, name: str, pose: Pose2D, owner: str | None) -> None:
+        """Add robot ``name`` at ``pose`` to the class (an arena's ``SpawnEntity``).
+
+        It is a robot of the class as a student's is (``/robots/NAME``, a token derived from
+        the class's secret, its state kept), spawned by ``owner`` (None: the instructor).
+
+        Raises:
+            ConfigError: an invalid or taken name, a full class, or no room at ``pose``.
+        """
+        check_name(name, "entity name")
+        if name in self.students or name in self._hosts:
+            raise ConfigError(f"entity name: '{name}' is a robot of this class already")
+        if len(self._hosts) >= self.max_robots:
+            raise ConfigError(f"the class is full ({self.max_robots} robots)")
+        student = Student(name, start=pose)
+        self.students[name] = student
+        try:
+            self._enrol(student)
+        except BaseException:
+            del self.students[name]
+            raise
+        self._spawned[name] = owner
+        log.info("robot %s spawned%s", name, f" by {owner}" if owner else "")
+
+    def delete(self, name: str) -> None:
+        """Take robot ``name`` out of the class and its world (KeyError: no such robot).
+
+        Its clients stay connected to a robot that no longer ticks until they leave.
+        """
+        host = self._hosts.pop(name)
+        world = self._worlds.pop(name)
+        world.remove(name)
+        if not len(world):
+            self.driver.remove(world)
+            self._shared.pop(id(world.world), None)
+        self.students.pop(name, None)
+        self._tokens.pop(name, None)
+        self._spawned.pop(name, None)
+        self.unclaimed.discard(name)
+        if host.recording is not None:
+            host.recording.detach()  # its bag ends here
+        log.info("robot %s deleted", name)
+
+    def owner(self, name: str) -> str | None:
+        """Who spawned robot ``name`` (None: the instructor, or a robot of the roster)."""
+        return self._spawned.get(name)
+
+    def spawned(self, name: str) -> bool:
+        """Whether robot ``name`` was spawned while the class runs."""
+        return name in self._spawned
+
+    def world(self, name: str) -> WorldHost:
+        """The world robot ``name`` lives in (KeyError: no robot of that name here yet)."""
+        return self._worlds[name]
+
+    def pace(self, name: str) -> Schedule:
+        """The pace robot ``name``'s messages follow (KeyError: no such robot yet)."""
+        return self.driver.pace(self._worlds[name])
 
     def knows(self, name: str) -> bool:
         """Whether ``name`` is (or may become, in an open class) a robot here, creating none."""
@@ -360,18 +434,14 @@ class Classroom:
             log.error("could not save the class's state in %s: %s", self.state.path, error)
 
     async def run_ticks(self) -> None:
-        """Tick every robot on the one schedule, forever (each robot's faults stay its own).
+        """Run the tick driver forever (each robot's faults stay its own), saving the state.
 
-        The robots' ticks are spread over ``SPREAD`` of the period in up to ``SLOTS``
-        groups, each group at its own offset: a robot's frames go out right after its group's
-        steps instead of waiting for every other robot's, so its latency does not grow with
-        the class, and the work of a tick does not arrive on the event loop all at once.
-        On sim time (``--speed``) every robot ticks at once instead: the tick's stamp is one
-        time for all, and the next tick cannot begin before the last group has run.
+        The driver ticks every robot's world: at real time together, spread over the period
+        (``heartbeat.driver``); above real time each world at its own pace.
         """
         saver = asyncio.create_task(self._save_every(SAVE_INTERVAL_S))
         try:
-            await self.schedule.run(self._tick_all)
+            await self.driver.run()
         finally:
             saver.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -382,55 +452,6 @@ class Classroom:
         while True:
             await asyncio.sleep(interval_s)
             self.save()
-
-    def _tick_all(self, lateness_s: float) -> None:
-        hosts = [host for _, host in self]
-        if not hosts:
-            return
-        loop = asyncio.get_running_loop()
-        now_s = self.clock.monotonic_s()
-        if isinstance(self.clock, SimClock):
-            self._tick_group(hosts, now_s, lateness_s)
-            return
-        slots = min(SLOTS, len(hosts))
-        slot_s = SPREAD * self.schedule.period_s / slots
-        groups = [hosts[index::slots] for index in range(slots)]
-        self._tick_group(groups[0], now_s, lateness_s)
-        for index, group in enumerate(groups[1:], start=1):
-            # One loop turn later: a /cmd_vel that arrived with the timer is applied first
-            # (its reader was woken by the same poll, and runs before what call_soon adds).
-            loop.call_later(index * slot_s, loop.call_soon, self._tick_group, group,
-                            now_s + index * slot_s, lateness_s)
-
-    def _tick_group(self, hosts: list[RobotHost], due_s: float, lateness_s: float) -> None:
-        """Advance a group's robots, prepare their costly readings together, deliver each's.
-
-        A sensor with ``prepare_many`` (the LiDAR) due on several robots of the group has
-        their readings computed at once (one ray intersection for a world); each robot's
-        ``end_tick`` then finds its reading ready.
-
-        Args:
-            hosts: the group's robots.
-            due_s: when the group was due (the class clock's monotonic s).
-            lateness_s: how late the period's tick started (s).
-        """
-        late_s = lateness_s + max(0.0, self.clock.monotonic_s() - due_s)
-        advanced = [host for host in hosts if host.begin_tick(late_s)]
-        preparing: dict[Sensor, list[RobotHost]] = {}
-        for host in advanced:
-            for sensor in host.due(late_s):
-                if sensor.prepare_many is not None:
-                    preparing.setdefault(sensor, []).append(host)
-        for sensor, group in preparing.items():
-            if len(group) > 1 and sensor.prepare_many is not None:
-                try:
-                    sensor.prepare_many([host.robot.sim for host in group])
-                except Exception as error:  # each robot then builds its own, in its boundary
-                    for host in group:
-                        host.faults.record(f"preparing the class's {sensor.topic.name} "
-                                           "together", error)
-        for host in advanced:
-            host.end_tick(late_s)
 
 
 def robot_state(host: RobotHost) -> dict[str, Any]:

@@ -1,21 +1,25 @@
 """Distances between the robot and a world's walls, from the world's geometry alone.
 
-Pure numpy over ``physics.world.World``: no pymunk space, so a trajectory from a recording is
-measured exactly as one from a live simulation. Every coordinate is in the ``map`` frame (m).
+Pure numpy over the world's shapes (``physics.geometry.WorldShapes``, the simulator's own
+arrays): no pymunk space, so a trajectory from a recording is measured exactly as one from a
+live simulation. Every coordinate is in the ``map`` frame (m).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from grading.trajectory import FloatArray
+from physics.geometry import WorldShapes, world_shapes
 from physics.world import World
 
 IntArray = npt.NDArray[np.intp]
+
+__all__ = ["SIDES", "WorldShapes", "nearest_obstacles", "obstacle_distances_m",
+           "obstacle_origins", "side_distance_m", "world_shapes"]
 
 SIDES = ("left", "right")
 """The side of the robot a wall follower keeps the wall on (MIT RSS: +1 left, -1 right)."""
@@ -23,33 +27,6 @@ SIDES = ("left", "right")
 PARALLEL_EPS = 1e-12
 """A lateral offset change below this along a wall counts as none (the wall is parallel to
 the robot's axis), so clipping never divides by zero."""
-
-
-@dataclass(frozen=True)
-class WorldShapes:
-    """A world's walls and discs as arrays, built once per world.
-
-    Attributes:
-        wall_a: first end of each wall, shape (n, 2) (m).
-        wall_b: second end of each wall, shape (n, 2) (m).
-        circle_centre: centre of each disc, shape (m, 2) (m).
-        circle_radius: radius of each disc, shape (m,) (m).
-    """
-
-    wall_a: FloatArray
-    wall_b: FloatArray
-    circle_centre: FloatArray
-    circle_radius: FloatArray
-
-
-def world_shapes(world: World) -> WorldShapes:
-    """The arrays of ``world``'s walls (boxes and polylines included) and discs."""
-    return WorldShapes(
-        wall_a=np.array([(w.x1, w.y1) for w in world.walls], dtype=np.float64).reshape(-1, 2),
-        wall_b=np.array([(w.x2, w.y2) for w in world.walls], dtype=np.float64).reshape(-1, 2),
-        circle_centre=np.array([(c.x, c.y) for c in world.circles],
-                               dtype=np.float64).reshape(-1, 2),
-        circle_radius=np.array([c.radius_m for c in world.circles], dtype=np.float64))
 
 
 def _point_segment_distances(points: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:

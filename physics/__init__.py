@@ -1,4 +1,4 @@
-"""websim's simulation core: a differential-drive robot, its LiDAR and its world, on pymunk.
+"""websim's simulation core: worlds of differential-drive robots and their LiDARs, on pymunk.
 
 Pure computation: no ROS, network, threads or plotting. Units are SI (m, s, rad, kg, N).
 
@@ -15,6 +15,7 @@ from physics.simulation import TICK_PERIOD_S, Simulation
 from physics.snapshots import Command, LaserScan, Odometry, Pose2D, RobotState, WheelState
 from physics.validation import ConfigError
 from physics.world import World, load_world
+from physics.world_sim import WorldSim
 
 __all__ = [
     "MODES",
@@ -34,6 +35,7 @@ __all__ = [
     "Simulation",
     "WheelState",
     "World",
+    "WorldSim",
     "compare_modes",
     "load_commands",
     "load_params",

@@ -1,4 +1,4 @@
-"""The simulation: one robot in one world, stepped at a fixed tick.
+"""The simulation: one robot's view of its world, stepped at a fixed tick.
 
 Example::
 
@@ -7,35 +7,29 @@ Example::
     sim.command(linear_mps=0.3, angular_rps=0.5)
     sim.step(20)                   # one second
     sim.odometry(), sim.ground_truth(), sim.scan()
+
+``Simulation(world, ...)`` is a world of one robot (``physics.world_sim.WorldSim``), named
+``SINGLE_ROBOT`` unless given a name. ``Simulation.of(world, name)`` is the same view of a
+robot of a world of many: its readings and commands are its own, ``step`` steps its whole
+world.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import difflib
 from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
-
-from physics.command_pipeline import AT_REST, drive
-from physics.frames import map_to_odom
-from physics.kinematics import clamp_command
 from physics.lidar import Lidar, ScanRequest, scan_many
-from physics.odometry import OdometryIntegrator
 from physics.params import LidarParams, NoiseParams, RobotParams
 from physics.robot import MobileRobotPhysics
 from physics.snapshots import Command, LaserScan, Odometry, Pose2D, RobotState, WheelState
-from physics.space import WALLS_ONLY, WorldSpace, build_world_space
-from physics.validation import ConfigError, as_finite_float
-from physics.wheels import WheelEncoders
 from physics.world import World
+from physics.world_sim import RUNTIME_PARAMS, TICK_PERIOD_S, WorldSim
 
-TICK_PERIOD_S = 0.05
-"""One tick of the course's virtual_robot node: 20 Hz."""
+SINGLE_ROBOT = "robot"
+"""The name of the robot of a world of one (``Simulation(world, ...)``)."""
 
-RUNTIME_PARAMS = tuple(item.name for item in dataclasses.fields(RobotParams))
-"""Robot parameters that ``update_params`` may change between ticks."""
+__all__ = ["RUNTIME_PARAMS", "SINGLE_ROBOT", "TICK_PERIOD_S", "Simulation", "cast_scans"]
 
 
 class Simulation:
@@ -49,6 +43,7 @@ class Simulation:
         lidar: the LiDAR; defaults to the shipped parameters.
         noise: noise sigmas; defaults to the shipped parameters (noiseless).
         dt_s: tick length (s).
+        name: the robot's name in its world (a class robot's: its student's).
 
     Raises:
         ConfigError: the robot's footprint at the start pose overlaps a wall.
@@ -57,79 +52,95 @@ class Simulation:
     def __init__(self, world: World, params: RobotParams | None = None, *,
                  mode: str = "kinematic", seed: int | None = None,
                  lidar: LidarParams | None = None, noise: NoiseParams | None = None,
-                 dt_s: float = TICK_PERIOD_S) -> None:
+                 dt_s: float = TICK_PERIOD_S, name: str = SINGLE_ROBOT) -> None:
         params = RobotParams() if params is None else params
-        self._world = world
-        self._dt_s = as_finite_float("dt_s", dt_s)
-        self._noise = NoiseParams() if noise is None else noise
-        self._world_space = build_world_space(world)
-        _check_clearance(self._world_space, world, world.start.x, world.start.y,
-                         params.footprint_radius_m, f"{world.source}: start",
-                         f"start {list(world.start)}")
-        self._robot = MobileRobotPhysics(params, self._world_space, world.start, mode)
-        self._lidar = Lidar(LidarParams() if lidar is None else lidar, self._world_space)
-        self._odometry = OdometryIntegrator()
-        self._wheels = WheelEncoders()
-        self._seed = seed
-        self._seed_noise(seed)
-        self._command = Command(0.0, 0.0)
-        self._drive = AT_REST
-        self._tick = 0
-        self._scan_cache: tuple[int, LaserScan] | None = None
+        if mode not in ("kinematic", "dynamic"):
+            raise ValueError(f"mode must be one of kinematic, dynamic, got {mode!r}")
+        self._world_sim = WorldSim(world, dt_s=dt_s, seed=seed, lidar=lidar, noise=noise)
+        self._world_sim._check_clear(world.start.x, world.start.y, params.footprint_radius_m,
+                                     None, f"{world.source}: start",
+                                     f"start {list(world.start)}")
+        self._world_sim.spawn(name, world.start, params, mode=mode, seed=seed)
+        self._name = name
+
+    @classmethod
+    def of(cls, world_sim: WorldSim, name: str) -> Simulation:
+        """Robot ``name``'s view of ``world_sim`` (KeyError: no such robot)."""
+        world_sim._row(name)
+        view = cls.__new__(cls)
+        view._world_sim = world_sim
+        view._name = name
+        return view
+
+    @property
+    def world_sim(self) -> WorldSim:
+        """The world this robot is in (with every other robot of it)."""
+        return self._world_sim
+
+    @property
+    def name(self) -> str:
+        """The robot's name in its world."""
+        return self._name
+
+    @property
+    def model(self) -> MobileRobotPhysics:
+        """The robot's physical model (its pymunk body, pose and speeds)."""
+        return self._world_sim._row(self._name).model
 
     @property
     def seed(self) -> int | None:
-        """The seed the simulation's random generator started from (None: fresh entropy)."""
-        return self._seed
+        """The seed the robot's random generator started from (None: fresh entropy)."""
+        seed = self._world_sim._row(self._name).seed
+        return seed if isinstance(seed, int) or seed is None else self._world_sim.seed
 
     @property
     def world(self) -> World:
         """The world being simulated."""
-        return self._world
+        return self._world_sim.world
 
     @property
     def params(self) -> RobotParams:
         """The robot parameters in force (payload changes included)."""
-        return self._robot.params
+        return self._world_sim._row(self._name).model.params
 
     @property
     def lidar(self) -> Lidar:
         """The LiDAR model."""
-        return self._lidar
+        return self._world_sim._row(self._name).lidar
 
     @property
     def noise(self) -> NoiseParams:
         """The noise sigmas in force."""
-        return self._noise
+        return self._world_sim._row(self._name).noise
 
     @property
     def dt_s(self) -> float:
         """Tick length (s)."""
-        return self._dt_s
+        return self._world_sim.dt_s
 
     @property
     def tick(self) -> int:
         """Ticks since spawn or the last reset."""
-        return self._tick
+        return self._world_sim.robot_tick(self._name)
 
     @property
     def time_s(self) -> float:
         """Simulated time since spawn or the last reset (s)."""
-        return self._tick * self._dt_s
+        return self._world_sim.robot_tick(self._name) * self._world_sim.dt_s
 
     @property
     def mode(self) -> str:
         """``"kinematic"`` or ``"dynamic"``; may be switched between ticks, state carried over."""
-        return self._robot.mode
+        return self._world_sim._row(self._name).model.mode
 
     @mode.setter
     def mode(self, mode: str) -> None:
-        self._robot.mode = mode
+        self._world_sim.set_mode(self._name, mode)
 
     @property
     def last_command(self) -> Command:
         """The clamped command in force; the robot keeps it until the next one."""
-        return self._command
+        return self._world_sim._row(self._name).command
 
     def command(self, linear_mps: float, angular_rps: float) -> Command:
         """Set the velocity command, like a ``/cmd_vel`` Twist (linear.x, angular.z).
@@ -139,65 +150,23 @@ class Simulation:
         Raises:
             ConfigError: a value is not a finite number; the command in force is unchanged.
         """
-        linear = as_finite_float("linear_mps", linear_mps)
-        angular = as_finite_float("angular_rps", angular_rps)
-        params = self._robot.params
-        self._command = clamp_command(linear, angular, params.max_linear_mps,
-                                      params.max_angular_rps)
-        return self._command
+        return self._world_sim.command(self._name, linear_mps, angular_rps)
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` ticks of ``dt_s`` each.
-
-        The command in force reaches the wheels through the robot's driver
-        (``physics.command_pipeline.drive``: its lag, scales and ramps; the shipped robot's
-        passes it through unchanged).
-        """
-        for _ in range(n):
-            self._drive, wheels = drive(self._drive, self._command, self._robot.params,
-                                        self._dt_s)
-            samples = self._robot.step(wheels, self._dt_s)
-            v_noise = self._draw_noise(self._noise.odom_linear_sigma_mps)
-            omega_noise = self._draw_noise(self._noise.odom_angular_sigma_rps)
-            self._odometry.integrate(samples, v_noise, omega_noise)
-            params = self._robot.params
-            self._wheels.integrate(samples, params.half_wheelbase_m, params.wheel_radius_m,
-                                   v_noise, omega_noise)
-            self._tick += 1
-
-    def _seed_noise(self, seed: int | None) -> None:
-        """Give each noise source its own stream, so reading one never shifts another."""
-        odom_seed, self._scan_seed = np.random.SeedSequence(seed).spawn(2)
-        self._odom_rng = np.random.default_rng(odom_seed)
-        self._episode = 0
-
-    def _draw_noise(self, sigma: float) -> float:
-        return float(self._odom_rng.normal(0.0, sigma)) if sigma > 0.0 else 0.0
-
-    def _scan_rng(self) -> np.random.Generator | None:
-        """This tick's scan noise stream, or None when the scan is noiseless.
-
-        A function of seed, episode and tick only, so a client that reads every scan and one
-        that reads every tenth see the same values.
-        """
-        if self._noise.scan_sigma_m <= 0.0:
-            return None
-        key = (*self._scan_seed.spawn_key, self._episode, self._tick)
-        return np.random.default_rng(
-            np.random.SeedSequence(self._scan_seed.entropy, spawn_key=key))
+        """Advance ``n`` ticks of ``dt_s`` each (the whole world: every robot in it)."""
+        self._world_sim.step(n)
 
     def odometry(self) -> Odometry:
         """Wheel odometry in the ``odom`` frame: zero at spawn, integrated from the encoders."""
-        return self._odometry.odometry()
+        return self._world_sim.odometry(self._name)
 
     def wheels(self) -> WheelState:
         """The drive wheels' angles and speeds, as the encoders odometry reads count them."""
-        return self._wheels.state()
+        return self._world_sim.wheels(self._name)
 
     def ground_truth(self) -> Odometry:
         """True pose and body-frame velocity in the ``map`` frame."""
-        pose = self._robot.pose
-        return Odometry(pose.x, pose.y, pose.theta, self._robot.v, self._robot.omega)
+        return self._world_sim.ground_truth(self._name)
 
     def map_to_odom(self) -> Pose2D:
         """The ``odom`` frame in ``map`` (m, rad): what perfect localization publishes.
@@ -205,35 +174,31 @@ class Simulation:
         The ground truth composed with the inverse of the odometry, so that map -> odom ->
         base_link is the true pose however far the odometry has drifted.
         """
-        odom = self._odometry.odometry()
-        return map_to_odom(self._robot.pose, Pose2D(odom.x, odom.y, odom.theta))
+        return self._world_sim.map_to_odom(self._name)
 
     @property
     def scan_is_current(self) -> bool:
         """Whether this tick's scan has been cast already."""
-        return self._scan_cache is not None and self._scan_cache[0] == self._tick
+        return self._world_sim.scan_is_current(self._name)
 
     def scan(self) -> LaserScan:
-        """The LiDAR scan at the current pose (computed once per tick)."""
-        if self._scan_cache is None or self._scan_cache[0] != self._tick:
-            scan = self._lidar.scan(self._robot.pose, self._scan_rng(), self._noise.scan_sigma_m)
-            self._scan_cache = (self._tick, scan)
-        return self._scan_cache[1]
+        """The LiDAR scan at the current pose, other robots seen (computed once per tick)."""
+        return self._world_sim.scan(self._name)
 
     def scan_request(self) -> ScanRequest:
-        """This tick's scan to cast elsewhere (``physics.lidar.scan_many``): LiDAR, pose, noise."""
-        return ScanRequest(self._lidar, self._robot.pose, self._scan_rng(),
-                           self._noise.scan_sigma_m)
+        """This tick's scan to cast elsewhere (``physics.lidar.scan_many``).
+
+        Its LiDAR, pose, noise, and the other robots of its world.
+        """
+        return self._world_sim.scan_request(self._name)
 
     def accept_scan(self, scan: LaserScan) -> None:
         """Keep ``scan``, cast from this tick's ``scan_request``, as this tick's ``scan()``."""
-        self._scan_cache = (self._tick, scan)
+        self._world_sim.accept_scan(self._name, scan)
 
     def state(self) -> RobotState:
         """A snapshot of everything that changes per tick."""
-        return RobotState(time_s=self.time_s, tick=self._tick, mode=self.mode,
-                          command=self._command, ground_truth=self.ground_truth(),
-                          odometry=self.odometry(), collided=self._robot.collided)
+        return self._world_sim.state(self._name)
 
     def set_payload(self, mass_kg: float | None = None,
                     inertia_kg_m2: float | None = None) -> RobotParams:
@@ -254,20 +219,7 @@ class Simulation:
         Raises:
             ConfigError: an unknown name or an invalid value; nothing is changed.
         """
-        for name in changes:
-            if name not in RUNTIME_PARAMS:
-                close = difflib.get_close_matches(name, RUNTIME_PARAMS, n=1)
-                hint = f"; did you mean '{close[0]}'?" if close else ""
-                raise ConfigError(f"{name}: unknown robot parameter{hint}")
-        params = dataclasses.replace(self._robot.params, **changes)
-        if params.footprint_radius_m != self._robot.params.footprint_radius_m:
-            _check_clearance(self._world_space, self._world, self._robot.pose.x,
-                             self._robot.pose.y, params.footprint_radius_m, "footprint_radius_m",
-                             f"{params.footprint_radius_m!r} at the robot's current position")
-        self._robot.set_params(params)
-        self._command = clamp_command(*self._command, params.max_linear_mps,
-                                      params.max_angular_rps)
-        return params
+        return self._world_sim.update_params(self._name, **changes)
 
     def place(self, pose: Pose2D, odometry: Pose2D) -> None:
         """Put the robot at rest at ``pose`` (map frame) with odometry reading ``odometry``.
@@ -275,57 +227,33 @@ class Simulation:
         What a class restores after a restart (``classroom.state``); a pose whose footprint
         overlaps a wall is refused (ConfigError) and nothing is changed.
         """
-        _check_clearance(self._world_space, self._world, pose.x, pose.y,
-                         self._robot.params.footprint_radius_m, "restored pose",
-                         f"{list(pose)}")
-        self._robot.teleport(pose)
-        self._odometry.place(odometry)
-        self._wheels.reset()
-        self._command = Command(0.0, 0.0)
-        self._drive = AT_REST
-        self._scan_cache = None
+        self._world_sim.place(self._name, pose, odometry)
+
+    def teleport(self, pose: Pose2D) -> None:
+        """Put the robot at rest at ``pose`` (map frame), its odometry as it is (``WorldSim``)."""
+        self._world_sim.teleport(self._name, pose)
 
     def reset(self, *, seed: int | None = None) -> None:
         """Back to the spawn pose at rest with a zero command and odometry zeroed.
 
         Parameters and mode stay as they are. ``seed`` restarts the noise streams as if the
-        simulation had been built with it; without it, noise goes on with fresh values.
+        simulation had been built with it; without it, noise goes on with fresh values. In a
+        world of several robots, another robot standing on the spawn pose sends this one to
+        the nearest free pose.
         """
-        if seed is not None:
-            self._seed_noise(seed)
-        else:
-            self._episode += 1
-        self._robot.teleport(self._world.start)
-        self._odometry.reset()
-        self._wheels.reset()
-        self._command = Command(0.0, 0.0)
-        self._drive = AT_REST
-        self._tick = 0
-        self._scan_cache = None
+        self._world_sim.reset_robot(self._name, seed=seed)
 
 
 def cast_scans(simulations: Sequence[Simulation]) -> None:
     """Cast this tick's scan of every simulation not yet scanned, alike LiDARs together.
 
-    ``physics.lidar.scan_many`` of their ``scan_request``: robots of a class in one world
-    share one ray intersection, each with its own noise, so ``scan()`` then gives what it
-    would have cast alone (to rounding, ~1e-15 m).
+    ``physics.lidar.scan_many`` of their ``scan_request``: robots in worlds of the same shapes
+    (a class's copies of one world, or one arena) share one ray intersection with the walls,
+    each adding the other robots of its world and its own noise, so ``scan()`` then gives what
+    it would have cast alone (to rounding, ~1e-15 m).
     """
     pending = [simulation for simulation in simulations if not simulation.scan_is_current]
     scans = scan_many([simulation.scan_request() for simulation in pending])
     for simulation, scan in zip(pending, scans, strict=True):
         simulation.accept_scan(scan)
 
-
-def _check_clearance(world_space: WorldSpace, world: World, x: float, y: float,
-                     radius_m: float, where: str, what: str) -> None:
-    """Raise if a footprint of ``radius_m`` at (x, y) would overlap a wall or obstacle."""
-    nearest = world_space.space.point_query_nearest((x, y), radius_m, WALLS_ONLY)
-    if nearest is None or nearest.distance >= radius_m:
-        return
-    shapes = (*world_space.wall_shapes, *world_space.circle_shapes)
-    origins = [wall.origin for wall in world.walls] + [disc.origin for disc in world.circles]
-    origin = origins[shapes.index(nearest.shape)]
-    gap = max(nearest.distance, 0.0)
-    raise ConfigError(f"{where}: {what} puts the robot footprint (radius {radius_m} m) "
-                      f"{gap:.3f} m from {origin}; it needs {radius_m} m of clearance")

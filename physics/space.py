@@ -1,7 +1,9 @@
-"""The pymunk space that holds a world's static shapes, and the collision categories.
+"""The pymunk space of a world: its static shapes, its robots' bodies, the collision categories.
 
-Walls and obstacles are static shapes in category ``WALL_CATEGORY``; the robot's footprint is in
-``ROBOT_CATEGORY``. LiDAR and sweep queries use ``WALLS_ONLY`` so the robot never sees itself.
+Walls and obstacles are static shapes in category ``WALL_CATEGORY``; every robot's footprint is
+in ``ROBOT_CATEGORY`` and in a pymunk group of its own (``robot_filter``), so a query made for
+a robot (``seen_by``) sees the walls and the other robots, never itself. ``WALLS_ONLY`` sees
+the static shapes alone.
 """
 
 from __future__ import annotations
@@ -15,7 +17,18 @@ from physics.world import World
 WALL_CATEGORY = 0b01
 ROBOT_CATEGORY = 0b10
 WALLS_ONLY = pymunk.ShapeFilter(categories=ROBOT_CATEGORY, mask=WALL_CATEGORY)
-"""Query filter that sees walls and obstacles, never the robot."""
+"""Query filter that sees walls and obstacles, never a robot."""
+
+
+def robot_filter(group: int) -> pymunk.ShapeFilter:
+    """The filter of the footprint of the robot numbered ``group`` (> 0) in its world."""
+    return pymunk.ShapeFilter(group=group, categories=ROBOT_CATEGORY)
+
+
+def seen_by(group: int) -> pymunk.ShapeFilter:
+    """Query filter for robot ``group``: walls, obstacles and the other robots, not itself."""
+    return pymunk.ShapeFilter(group=group, categories=ROBOT_CATEGORY,
+                              mask=WALL_CATEGORY | ROBOT_CATEGORY)
 
 COLLISION_SLOP_M = 0.0005
 """Overlap pymunk tolerates between touching shapes. Its default, 0.1, would be 10 cm here."""

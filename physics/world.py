@@ -18,6 +18,8 @@ The format (every coordinate in the ``map`` frame, metres and radians)::
       odom_linear_sigma_mps: 0.02
     lidar:                       # overrides the parameter file's lidar section (LIDAR_KEYS)
       angle_min_rad: -pi         # the first beam's angle: -pi gives -pi..pi, as rplidar_ros
+    robots:                      # robots this world places (a shared world: --arena)
+      - {name: alice, start: [x, y, theta], params: {mass_kg: 2.0}}
 
 Boxes and polylines become wall segments; circles stay circles. Every error raises
 ``ConfigError`` naming the file and the entry, e.g. ``worlds/maze.yaml: walls[3]: ...``.
@@ -39,7 +41,7 @@ from physics.map_grid import (
     default_resolution_m,
     grid_over,
 )
-from physics.params import LidarParams, NoiseParams
+from physics.params import LidarParams, NoiseParams, RobotParams
 from physics.shipped import by_name, shipped
 from physics.snapshots import Pose2D
 from physics.validation import (
@@ -67,8 +69,13 @@ the real robot, and websim must not fight them) or ``perfect`` (websim publishes
 from the ground truth, so map-frame tools work without a localizer)."""
 
 _TOP_LEVEL_KEYS = ("name", "start", "walls", "polylines", "boxes", "circles",
-                   "map_resolution_m", "localization", "noise", "lidar")
+                   "map_resolution_m", "localization", "noise", "lidar", "robots")
 _NOISE_KEYS = tuple(item.name for item in dataclasses.fields(NoiseParams))
+_ROBOT_KEYS = ("name", "start", "params")
+_PARAM_KEYS = tuple(item.name for item in dataclasses.fields(RobotParams))
+
+MAX_PLACED_ROBOTS = 1000
+"""Most robots a world file may place (each is a body and a LiDAR: a bound on the file)."""
 
 LIDAR_KEYS = ("angle_min_rad",)
 """What a world (or a scenario) may set of the LiDAR: the scan's angle range. The beams
@@ -143,6 +150,28 @@ class CircleObstacle:
 
 
 @dataclass(frozen=True)
+class PlacedRobot:
+    """A robot a world file places (its ``robots`` list): where it starts, and how it differs.
+
+    Attributes:
+        name: its name (the class robot it is, in ``websim serve --class ROSTER --arena``).
+        start: its spawn pose in the map frame (m, rad).
+        params: robot parameters that override the parameter file's, as (``RobotParams``
+            field, value) pairs (``params_over``).
+        origin: the file entry it came from, e.g. ``"robots[1]"``.
+    """
+
+    name: str
+    start: Pose2D
+    params: tuple[tuple[str, float], ...]
+    origin: str
+
+    def params_over(self, base: RobotParams) -> RobotParams:
+        """``base`` (the parameter file's robot) with this robot's values in place of its."""
+        return dataclasses.replace(base, **dict(self.params))
+
+
+@dataclass(frozen=True)
 class World:
     """An immutable world.
 
@@ -159,6 +188,7 @@ class World:
             value) pairs (``noise_over``).
         lidar: LiDAR parameters that override the parameter file's, as (``LidarParams``
             field, value) pairs (``lidar_over``; ``LIDAR_KEYS``).
+        robots: the robots it places, by name (a shared world; ``PlacedRobot``).
     """
 
     name: str
@@ -171,6 +201,11 @@ class World:
     localization: str = LOCALIZATIONS[0]
     noise: tuple[tuple[str, float], ...] = ()
     lidar: tuple[tuple[str, float], ...] = ()
+    robots: tuple[PlacedRobot, ...] = ()
+
+    def placed(self, name: str) -> PlacedRobot | None:
+        """The robot of that name this world places, or None."""
+        return next((robot for robot in self.robots if robot.name == name), None)
 
     def noise_over(self, base: NoiseParams) -> NoiseParams:
         """``base`` (the parameter file's noise) with this world's sigmas in place of its."""
@@ -184,8 +219,8 @@ class World:
     @property
     def bounds(self) -> tuple[float, float, float, float]:
         """Axis-aligned bounds ``(min_x, min_y, max_x, max_y)`` of all shapes and the start (m)."""
-        xs = [self.start.x]
-        ys = [self.start.y]
+        xs = [self.start.x, *(robot.start.x for robot in self.robots)]
+        ys = [self.start.y, *(robot.start.y for robot in self.robots)]
         for wall in self.walls:
             xs += [wall.x1, wall.x2]
             ys += [wall.y1, wall.y2]
@@ -244,12 +279,16 @@ def world_from_dict(document: Any, *, source: str = "<world>") -> World:
     circles = [_circle(source, f"circles[{index}]", entry)
                for index, entry in enumerate(_as_list(source, top, "circles"))]
 
-    for box in boxes:
-        if _inside_convex(box_corners(box), start.x, start.y):
-            raise fail(f"{source}: start", f"{list(start)} is inside the box {box.origin}")
-    for circle in circles:
-        if math.hypot(start.x - circle.x, start.y - circle.y) < circle.radius_m:
-            raise fail(f"{source}: start", f"{list(start)} is inside the circle {circle.origin}")
+    robots = _robots(source, top)
+    for where, pose in (("start", start), *((f"{robot.origin} ({robot.name}).start",
+                                             robot.start) for robot in robots)):
+        for box in boxes:
+            if _inside_convex(box_corners(box), pose.x, pose.y):
+                raise fail(f"{source}: {where}", f"{list(pose)} is inside the box {box.origin}")
+        for circle in circles:
+            if math.hypot(pose.x - circle.x, pose.y - circle.y) < circle.radius_m:
+                raise fail(f"{source}: {where}",
+                           f"{list(pose)} is inside the circle {circle.origin}")
     world = World(name=name, start=start, walls=tuple(walls), circles=tuple(circles),
                   source=source, boxes=tuple(boxes),
                   map_resolution_m=check_resolution(
@@ -257,7 +296,7 @@ def world_from_dict(document: Any, *, source: str = "<world>") -> World:
                       top.get("map_resolution_m", DEFAULT_MAP_RESOLUTION_M)),
                   localization=_localization(source, top.get("localization", LOCALIZATIONS[0])),
                   noise=_noise(source, top.get("noise")),
-                  lidar=lidar_overrides(f"{source}: lidar", top.get("lidar")))
+                  lidar=lidar_overrides(f"{source}: lidar", top.get("lidar")), robots=robots)
     if "map_resolution_m" not in top:  # a large world's default map is coarser, not an error
         world = dataclasses.replace(world, map_resolution_m=default_resolution_m(world.bounds))
     grid_over(world.bounds, world.map_resolution_m, f"{source}: map_resolution_m")
@@ -311,6 +350,50 @@ def lidar_overrides(where: str, value: Any) -> tuple[tuple[str, float], ...]:
     except ConfigError as error:
         raise ConfigError(f"{where}.{error}") from None
     return tuple(values.items())
+
+
+def _robots(source: str, top: Any) -> tuple[PlacedRobot, ...]:
+    """The world's ``robots``, checked.
+
+    Names unique, starts finite, params checked as the parameter file's robot section is, and
+    no two footprints overlapping at their starts.
+    """
+    entries = _as_list(source, top, "robots")
+    if len(entries) > MAX_PLACED_ROBOTS:
+        raise fail(f"{source}: robots", f"at most {MAX_PLACED_ROBOTS} robots, got "
+                                        f"{len(entries)}")
+    robots: list[PlacedRobot] = []
+    for index, entry in enumerate(entries):
+        where = f"{source}: robots[{index}]"
+        mapping = as_mapping(where, entry)
+        check_keys(where, mapping, _ROBOT_KEYS)
+        name = mapping.get("name")
+        if not isinstance(name, str) or not name.strip() or len(name) > 64:
+            raise fail(f"{where}.name", f"expected a robot's name (text), got {shown(name)}")
+        if any(robot.name == name for robot in robots):
+            raise fail(f"{where}.name", f"'{name}' is placed twice")
+        if "start" not in mapping:
+            raise fail(f"{where}.start", "missing: [x, y, theta]")
+        pose = Pose2D(*as_number_list(f"{where}.start", mapping["start"], 3))
+        params = as_mapping(f"{where}.params", mapping.get("params") or {})
+        check_keys(f"{where}.params", params, _PARAM_KEYS)
+        try:
+            checked = RobotParams(**params)
+        except ConfigError as error:
+            raise ConfigError(f"{where}.params.{error}") from None
+        robots.append(PlacedRobot(name, pose, tuple((key, float(getattr(checked, key)))
+                                                    for key in _PARAM_KEYS if key in params),
+                                  f"robots[{index}]"))
+    default_radius = RobotParams().footprint_radius_m
+    for index, robot in enumerate(robots):
+        radius = dict(robot.params).get("footprint_radius_m", default_radius)
+        for other in robots[:index]:
+            reach = radius + dict(other.params).get("footprint_radius_m", default_radius)
+            if math.hypot(robot.start.x - other.start.x, robot.start.y - other.start.y) < reach:
+                raise fail(f"{source}: {robot.origin}.start",
+                           f"{list(robot.start)}: the footprint of '{robot.name}' overlaps "
+                           f"that of '{other.name}' ({other.origin})")
+    return tuple(robots)
 
 
 def _as_list(source: str, top: Any, key: str) -> list[Any]:

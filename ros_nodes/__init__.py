@@ -1,1 +1,1 @@
-"""websim's ROS-facing layer: message shapes, the virtual robot, the rosbridge server, nodes."""
+"""websim's ROS-facing layer: messages, the virtual robot, its hosts, sim time, nodes."""

@@ -1,14 +1,15 @@
-"""One robot in real time: its simulation, its bridge, its tick loop, its health.
+"""One robot served: its bridge, its endpoint, its health, and its part of each tick.
 
 A ``RobotHost`` owns everything of one robot and nothing of another, so a server may run
-several. Its tick loop runs against the monotonic clock (deadlines advance by exactly one
-period, so there is no drift) and is the robot's fault boundary: an exception while stepping
-the robot, or while encoding or delivering one of its messages, is recorded
-(``Faults``: logged once with the cause, counted, ``/healthz`` says ``degraded``) and the loop
-goes on; a robot whose state went non-finite is reset to its spawn pose. When the host cannot
-keep up (a tick starts half a period late), that tick's /scan is shed first; /odom and /tf
-keep their rate. Above real time (``--speed`` over 1) no tick is late (the schedule waits
-instead: ``rosbridge.transport.schedule``), so nothing is shed.
+many. It does not tick on its own: its world's host (``ros_nodes.world_host``) steps the world
+and asks each robot's host for its part of the tick, and the one tick driver
+(``heartbeat.driver``) runs every world's ticks. The host is the robot's fault boundary: an
+exception while building, encoding or delivering one of its messages is recorded (``Faults``:
+logged once with the cause, counted, ``/healthz`` says ``degraded``) and the ticks go on; a
+robot whose state went non-finite is reset to its spawn pose. When the server cannot keep up
+(a tick starts half a period late), that tick's /scan is shed first; /odom and /tf keep their
+rate. Above real time (``--speed`` over 1) no tick is late (the driver waits instead), so
+nothing is shed.
 """
 
 from __future__ import annotations
@@ -16,11 +17,11 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from collections.abc import Collection, Mapping
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from physics import TICK_PERIOD_S, ConfigError
+from physics import ConfigError
 from ros_nodes.recording import Recording
 from ros_nodes.robot_endpoint import RobotEndpoint
 from ros_nodes.robot_interface import (
@@ -31,17 +32,18 @@ from ros_nodes.robot_interface import (
 from ros_nodes.robot_services import require_admin
 from ros_nodes.sensors import Sensor
 from ros_nodes.simulation_services import WATCHABLE_SERVICES
-from ros_nodes.virtual_robot_core import VirtualRobot
+from ros_nodes.virtual_robot_core import Publication, VirtualRobot
 from rosbridge.core.access import DriveRules
 from rosbridge.core.bridge import Bridge
-from rosbridge.core.clock import speed_text
 from rosbridge.core.errors import ServiceError
 from rosbridge.core.faults import Faults
 from rosbridge.core.limits import LatchedBytes
-from rosbridge.core.session import Session
+from rosbridge.core.session import Flush, Session
 from rosbridge.tf.republisher import ACTION as TF_REPUBLISHER_ACTION
 from rosbridge.tf.republisher import REPUBLISH_SERVICE, TfRepublisher
-from rosbridge.transport.schedule import Schedule
+
+Write = Callable[[Flush], None]
+"""Has a flush written (the tick driver's connections): the loop closers at once."""
 
 log = logging.getLogger("websim.robot")
 
@@ -110,23 +112,20 @@ class TickStats:
 
 
 class RobotHost:
-    """A robot, its bridge and its ticks.
+    """A robot and its bridge.
 
     Args:
-        robot: the virtual robot to run.
-        schedule: the tick schedule it follows (default: one of its own).
+        robot: the virtual robot to serve.
         idle_pause_s: stop ticking (keeping the state) once nobody has been connected for
             this long; the next connection resumes it. None: never pause.
         latched: the pool its clients' latched messages are counted in (its own, within its
             server's: ``LatchedBytes.for_robot``; default: one of the default size).
 
     The robot's clock (``robot.clock``) is the host's: its monotonic time (wall time) measures
-    the idle time, the bridge's throttles and timeouts and the last command's age; its own
-    schedule (when none is given) ticks on it, so a ``SimClock`` sets the robot's speed.
+    the idle time, the bridge's throttles and timeouts and the last command's age.
     """
 
-    def __init__(self, robot: VirtualRobot, schedule: Schedule | None = None,
-                 idle_pause_s: float | None = None,
+    def __init__(self, robot: VirtualRobot, idle_pause_s: float | None = None,
                  latched: LatchedBytes | None = None) -> None:
         self.robot = robot
         self.faults = Faults()
@@ -138,7 +137,6 @@ class RobotHost:
         self.tf_republisher = TfRepublisher(self.bridge)
         """tf2_web_republisher's service and action, from the robot's /tf and /tf_static."""
         self.stats = TickStats()
-        self.schedule = schedule or Schedule(TICK_PERIOD_S, clock)
         self.held = False
         """Paused by an admin (``/websim/pause``), whoever is connected."""
         self.recording: Recording | None = None
@@ -151,10 +149,6 @@ class RobotHost:
         sim = robot.sim
         self.endpoint.log.info(f"world '{sim.world.name}', {sim.mode} mode")
 
-    async def run_ticks(self) -> None:
-        """Tick this robot alone, forever."""
-        await self.schedule.run(self.tick)
-
     def _idle(self) -> bool:
         """Whether the robot should pause: nobody connected for ``idle_pause_s``."""
         if self.bridge.sessions:
@@ -163,40 +157,50 @@ class RobotHost:
         return self._idle_pause_s is not None and \
             self._clock.monotonic_s() - self._last_client_s >= self._idle_pause_s
 
-    def tick(self, lateness_s: float = 0.0) -> None:
-        """One tick: step the robot, deliver its messages, expire service calls; never raises.
-
-        A robot nobody has been connected to for ``idle_pause_s`` is not stepped (paused).
-        ``begin_tick`` then ``end_tick``; a class prepares its robots' costly readings
-        together in between (``Sensor.prepare_many``: the LiDAR's ``cast_scans``).
-        """
-        if self.begin_tick(lateness_s):
-            self.end_tick(lateness_s)
-
-    def begin_tick(self, lateness_s: float = 0.0) -> bool:
-        """Advance the robot one tick, unless it is paused; whether it advanced. Never raises.
-
-        A robot whose step failed, or whose state went non-finite, is reset to its spawn pose.
-        """
+    def pausing(self) -> bool:
+        """Whether the robot sits this tick out: held by an admin, or idle (``stats.paused``)."""
         idle = self._idle()  # first: it notes when clients were last here
         self.stats.paused = self.held or idle
-        if self.stats.paused:
-            return False
+        return self.stats.paused
+
+    def before_step(self, lateness_s: float) -> bool:
+        """Its part before its world steps (its command's watchdog); whether it may step.
+
+        Never raises: a fault is recorded and the robot reset to its spawn pose.
+        """
         self.stats.ticks += 1
         self.stats.lateness_s.append(lateness_s)
         try:
-            self.robot.advance()
+            self.robot.before_step()
         except Exception as error:  # the robot's boundary: record, recover, go on
             self.faults.record("stepping the robot", error)
-            self._recover("its step failed")
-            return False
-        truth = self.robot.sim.ground_truth()
-        if not all(math.isfinite(value) for value in truth):
-            self.faults.record("stepping the robot", FloatingPointError(
-                f"non-finite state {tuple(truth)}"))
-            self._recover("its state went non-finite")
+            self.recover("its step failed")
             return False
         return True
+
+    def after_step(self) -> bool:
+        """Its part after its world stepped; whether it ended in a finite state.
+
+        Never raises: a state gone non-finite is recorded and the robot reset to its spawn.
+        """
+        try:
+            self.robot.after_step()
+            truth = self.robot.sim.ground_truth()
+            if not all(math.isfinite(value) for value in truth):
+                raise FloatingPointError(f"non-finite state {tuple(truth)}")
+        except Exception as error:  # the robot's boundary: record, recover, go on
+            self.faults.record("stepping the robot", error)
+            self.recover("its state went non-finite" if isinstance(error, FloatingPointError)
+                         else "its step failed")
+            return False
+        return True
+
+    def reads_scan(self, lateness_s: float = 0.0) -> bool:
+        """Whether a message ``end_tick`` builds reads the LiDAR's scan.
+
+        The tick's scan pass casts it with every other robot's.
+        """
+        return any(sensor.reads_scan for sensor in self.due(lateness_s))
 
     def due(self, lateness_s: float = 0.0) -> list[Sensor]:
         """The sensors whose messages ``end_tick`` will build (wanted, and not shed)."""
@@ -204,8 +208,19 @@ class RobotHost:
         return [sensor for sensor in self.robot.due(self._wanted())
                 if not (shed and sensor.sheddable)]
 
-    def end_tick(self, lateness_s: float = 0.0) -> None:
-        """Build and deliver the messages of the tick ``begin_tick`` advanced to; never raises.
+    def wants(self, topic: str) -> bool:
+        """Whether a client of the robot subscribes to ``topic`` (a ROS graph: to all)."""
+        wanted = self._wanted()
+        return wanted is None or topic in wanted
+
+    def end_tick(self, write: Write, lateness_s: float = 0.0,
+                 shared: Sequence[Publication] = ()) -> None:
+        """Build and deliver the messages of the tick just stepped; never raises.
+
+        ``write`` has each flush written: the clients closing a loop first, before the
+        watchers' frames are even queued. ``shared``: messages of the robot's world, built
+        once for all its robots (``/world_robots``), delivered to its clients that want them
+        (the world's, not the robot's: its tap does not carry them).
 
         Only messages some client subscribes to are built (for a ROS graph: all). A tick that
         starts half a period late builds no sheddable sensor's message (/scan): it is shed,
@@ -220,16 +235,17 @@ class RobotHost:
             publications = self.robot.publications(wanted, shed)
         except Exception as error:  # the robot's boundary: record, recover, go on
             self.faults.record("stepping the robot", error)
-            self._recover("building its messages failed")
+            self.recover("building its messages failed")
             publications = []
         else:
             self.stats.scans_cast += 0 if shed else sheddable
         messages = [(spec.name, msg) for spec, msg in publications]
-        writers = self.schedule.writers  # the drivers' frames first, before the watchers'
+        messages += [(spec.name, msg) for spec, msg in shared
+                     if wanted is None or spec.name in wanted]
         try:  # throttles count from when the tick was due: a late tick is no shorter gap
             for flush in self.bridge.publish_many(messages,
                                                   self._clock.monotonic_s() - lateness_s):
-                writers.write(flush)
+                write(flush)
         except Exception as error:  # the robot's boundary: record, go on
             self.faults.record(f"delivering {', '.join(name for name, _ in messages)}", error)
         try:
@@ -238,7 +254,7 @@ class RobotHost:
             self.faults.record("republishing TF", error)
         try:
             self.bridge.services.expire()
-            writers.write(self.bridge.take_flush())
+            write(self.bridge.take_flush())
         except Exception as error:
             self.faults.record("expiring service calls", error)
 
@@ -248,7 +264,7 @@ class RobotHost:
             return None
         return self.bridge.topics.subscribed_topics()
 
-    def _recover(self, why: str) -> None:
+    def recover(self, why: str) -> None:
         """Put the robot back at spawn (a finite state) after a fault."""
         self.stats.resets += 1
         log.error("robot reset to its spawn pose: %s", why)
@@ -312,16 +328,21 @@ class RobotHost:
         self.stats.paused = paused or self._idle()
         return {"paused": self.held}
 
-    def health(self) -> dict[str, Any]:
-        """This robot's part of /healthz."""
+    def health(self, pace: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """This robot's part of /healthz.
+
+        ``pace``: its tick driver's report of its pace (``ticks_due``, ``tick_resyncs``,
+        ``speed``, ``clients_released``), in their place.
+        """
         sessions = self.bridge.sessions
+        pace = pace or {}
         report: dict[str, Any] = {
             "status": "degraded" if self.faults.degraded else "ok",
             "ticks": self.stats.ticks,
-            "ticks_due": self.schedule.ticks_due(),
+            "ticks_due": pace.get("ticks_due", self.stats.ticks),
             "paused": self.stats.paused,
             "tick_jitter_p99_ms": round(self.stats.jitter_p99_ms(), 3),
-            "tick_resyncs": self.schedule.resyncs,
+            "tick_resyncs": pace.get("tick_resyncs", 0),
             "scans_shed": self.stats.scans_shed,
             "scans_cast": self.stats.scans_cast,
             "robot_resets": self.stats.resets,
@@ -331,8 +352,8 @@ class RobotHost:
             "frames_dropped": sum(session.outbox.dropped for session in sessions),
             "frames_sent": sum(session.outbox.sent for session in sessions),
             "sim_time_s": round(self.robot.sim.time_s, 3),
-            "speed": speed_text(self.schedule.speed),
-            "clients_released": self.schedule.clients_released,
+            "speed": pace.get("speed", 1.0),
+            "clients_released": pace.get("clients_released", 0),
             "mode": self.robot.sim.mode,
             "world": self.robot.sim.world.name,
             "last_driver": self.endpoint.last_driver,

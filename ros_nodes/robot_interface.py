@@ -101,6 +101,10 @@ WORLD = TopicSpec("/world", "visualization_msgs/msg/MarkerArray", "out", 0, "tra
                   "the walls, frame map (simulation only)")
 MAP = TopicSpec("/map", "nav_msgs/msg/OccupancyGrid", "out", 0, "transient_local",
                 "the world's occupancy grid, frame map (as nav2's map_server publishes it)")
+WORLD_ROBOTS = TopicSpec("/world_robots", "visualization_msgs/msg/MarkerArray", "out", 1,
+                         "reliable", "every robot of the world (this one too) at this tick: "
+                         "its footprint, a cylinder whose text is its name, frame map "
+                         "(simulation only; an arena's other robots)", recorded=False)
 
 JOINT_STATES = TopicSpec("/joint_states", "sensor_msgs/msg/JointState", "out",
                          ODOM.every_ticks, "reliable",
@@ -113,8 +117,8 @@ CLOCK = TopicSpec("/clock", "rosgraph_msgs/msg/Clock", "out", 1, "reliable",
                   "the time of the tick, what its messages are stamped with: wall time, or sim "
                   "time with --speed")
 
-ROBOT_TOPICS = (CMD_VEL, ODOM, SCAN, TF, TF_STATIC, GROUND_TRUTH, WORLD, MAP, JOINT_STATES,
-                ROBOT_DESCRIPTION, CLOCK)
+ROBOT_TOPICS = (CMD_VEL, ODOM, SCAN, TF, TF_STATIC, GROUND_TRUTH, WORLD, MAP, WORLD_ROBOTS,
+                JOINT_STATES, ROBOT_DESCRIPTION, CLOCK)
 """Every topic of the virtual robot, in the README's order."""
 
 PUBLISHED_TOPICS = tuple(spec for spec in ROBOT_TOPICS if spec.direction == "out")

@@ -250,6 +250,43 @@ def world_markers_msg(world: World, time_s: float) -> Message:
     return {"markers": markers}
 
 
+ROBOT_MARKER_HEIGHT_M = 0.12
+"""How tall a robot's cylinder in ``/world_robots`` is drawn (m): about the chassis."""
+
+ROBOT_COLOR = {"r": 0.15, "g": 0.39, "b": 0.92, "a": 0.8}
+
+
+def world_robots_msg(names: Sequence[str], poses: Sequence[Sequence[float]],
+                     radii_m: Sequence[float], time_s: float) -> Message:
+    """``visualization_msgs/MarkerArray`` of a world's robots at a tick, in ``map``.
+
+    One CYLINDER per robot (namespace ``world_robots``, its id its place in the world's spawn
+    order, its ``text`` its name), the footprint's diameter wide, turned to the robot's yaw.
+
+    Args:
+        names: the robots' names.
+        poses: each robot's (x, y, yaw) in the map frame (m, rad).
+        radii_m: each robot's footprint radius (m).
+        time_s: the stamp (s).
+    """
+    markers = []
+    for index, (name, (x, y, yaw), radius) in enumerate(zip(names, poses, radii_m,
+                                                             strict=True)):
+        size = 2.0 * float(radius)
+        pose = {"position": vector3(float(x), float(y), 0.5 * ROBOT_MARKER_HEIGHT_M),
+                "orientation": yaw_quaternion(float(yaw))}
+        marker = _marker(time_s, index, MARKER_CYLINDER, pose,
+                         vector3(size, size, ROBOT_MARKER_HEIGHT_M), ROBOT_COLOR, [])
+        marker["ns"] = WORLD_ROBOTS_NAMESPACE
+        marker["text"] = name
+        markers.append(marker)
+    return {"markers": markers}
+
+
+WORLD_ROBOTS_NAMESPACE = "world_robots"
+"""The marker namespace of ``/world_robots`` (``/world``'s is ``world``)."""
+
+
 MAPS_KEPT = 32
 """Worlds whose maps (grid and message data) are kept for the next robot in the same world:
 a class's robots share one map per world instead of each holding ~0.1 MB of it."""

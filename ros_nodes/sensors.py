@@ -2,18 +2,18 @@
 
 A ``Sensor`` is one periodic topic of the robot (its ``TopicSpec``: name, type, and rate as
 ``every_ticks``), how its message is built from the simulation at a stamp, whether a late
-tick may shed it, and, for a costly one, how to compute the readings of several robots at
-once (a class in one world). The robot publishes ``ROBOT_SENSORS``; adding a sensor is one
-more ``Sensor`` in that tuple (and its ``TopicSpec`` in ``robot_interface``).
+tick may shed it, and whether it reads the LiDAR's scan: the tick's one scan pass casts the
+scans of every robot that will read one, together (``heartbeat.driver``), before any message
+is built. The robot publishes ``ROBOT_SENSORS``; adding a sensor is one more ``Sensor`` in
+that tuple (and its ``TopicSpec`` in ``robot_interface``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from physics import ConfigError, Simulation
-from physics.simulation import cast_scans
 from physics.world import LOCALIZATIONS
 from ros_nodes.robot_interface import CLOCK, GROUND_TRUTH, JOINT_STATES, ODOM, SCAN, TF, TopicSpec
 from ros_nodes.robot_messages import (
@@ -37,9 +37,6 @@ from rosbridge.msgs.values import Message
 BuildMessage = Callable[[Simulation, float], Message]
 """Builds a sensor's message from the simulation at a stamp (s)."""
 
-PrepareMany = Callable[[Sequence[Simulation]], None]
-"""Computes this tick's readings of several simulations together (then ``build`` finds them)."""
-
 
 @dataclass(frozen=True)
 class Sensor:
@@ -51,14 +48,14 @@ class Sensor:
             ``clock.stamp_s``).
         sheddable: a tick that starts late may leave it out (the LiDAR: the biggest
             message, whose loss a reader survives); the others keep their rate.
-        prepare_many: computes this tick's readings of several robots at once, when that is
-            cheaper than one by one (the LiDAR of a class in one world); None: none needed.
+        reads_scan: ``build`` reads the robot's LiDAR scan (``Simulation.scan``), which the
+            tick's one scan pass casts for every robot due, together.
     """
 
     topic: TopicSpec
     build: BuildMessage
     sheddable: bool = False
-    prepare_many: PrepareMany | None = None
+    reads_scan: bool = False
 
     def due(self, tick: int) -> bool:
         """Whether it publishes at ``tick`` (ticks since spawn or reset)."""
@@ -128,7 +125,7 @@ def ground_truth(sim: Simulation, stamp_s: float) -> Message:
 
 
 def laser_scan(sim: Simulation, stamp_s: float) -> Message:
-    """``/scan``: the LiDAR's scan in ``laser`` (cast now unless prepared this tick)."""
+    """``/scan``: the LiDAR's scan in ``laser`` (cast in the tick's scan pass, else now)."""
     return laser_scan_msg(sim.scan(), stamp_s)
 
 
@@ -136,7 +133,7 @@ TIME = Sensor(CLOCK, sim_clock)
 ODOMETRY = Sensor(ODOM, odometry)
 ODOMETRY_TF = Sensor(TF, odometry_transform)
 GROUND_TRUTH_POSE = Sensor(GROUND_TRUTH, ground_truth)
-LIDAR = Sensor(SCAN, laser_scan, sheddable=True, prepare_many=cast_scans)
+LIDAR = Sensor(SCAN, laser_scan, sheddable=True, reads_scan=True)
 WHEEL_JOINT_STATES = Sensor(JOINT_STATES, joint_states)
 
 LOCALIZED_TF = Sensor(TF, localized_transforms)

@@ -2,10 +2,10 @@
 
 ``SimulatorControl`` is the seam between ROS 2's ``simulation_interfaces`` services
 (``ros_nodes.simulation_services``: their requests, result codes and rights) and the world
-they act on: its entities, their poses, pause, play and step, reset, spawn and delete. Today a
-world holds one robot (``OneRobotWorld``: a ``RobotHost``, the single robot of ``websim
-serve`` or one student's in a class); a world of many robots is one more adapter of the same
-protocol.
+they act on: its entities, their poses, pause, play and step, reset, spawn and delete, over
+a world's host (``ros_nodes.world_host.WorldHost``): a world of one robot (``OneRobotWorld``:
+the single robot of ``websim serve``, or one student's in a class), or the arena every robot
+of a class shares (``SharedWorld``: ``--arena``).
 
 Units and frames: poses are in the world's ``map`` frame (m, rad), velocities ``v`` (m/s,
 along the heading) and ``omega`` (rad/s, counter-clockwise), as ``physics`` gives them.
@@ -13,17 +13,17 @@ along the heading) and ``omega`` (rad/s, counter-clockwise), as ``physics`` give
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import dataclasses
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
-from physics import ConfigError
+from physics import ConfigError, WorldSim
 from physics.snapshots import Odometry, Pose2D
 from ros_nodes.urdf import CHASSIS_HEIGHT_M, LASER_HEIGHT_M
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Bridge
-from rosbridge.core.session import Session
-from rosbridge.transport.schedule import Schedule
+from rosbridge.core.session import Flush, Session
 
 CATEGORY_OBJECT = 0
 CATEGORY_ROBOT = 1
@@ -126,7 +126,7 @@ class SimulatorControl(Protocol):
         """Hold (or run) the world; ``stopped``: held at its reset state (reset it first)."""
 
     def step(self, steps: int, progress: Progress) -> Cancel:
-        """Advance a held world ``steps`` ticks, one per tick of its schedule.
+        """Advance a held world ``steps`` ticks, one per tick of the server.
 
         Raises:
             ConfigError: it is not held, or another stepping request is running.
@@ -161,90 +161,134 @@ class SimulatorControl(Protocol):
 
 
 class _Host(Protocol):
-    """What ``OneRobotWorld`` uses of a ``RobotHost`` (structurally: no import of it)."""
+    """What a control uses of a robot's host (``ros_nodes.robot_host.RobotHost``)."""
 
     robot: VirtualRobot
     bridge: Bridge
-    schedule: Schedule
     held: bool
 
-    def tick(self, lateness_s: float = 0.0) -> None:
-        """One tick of the robot (stepped unless held or idle)."""
+
+class _World(Protocol):
+    """What a control uses of a world's host (``ros_nodes.world_host.WorldHost``)."""
+
+    world: WorldSim
+    hosts: dict[str, Any]
+
+    def __iter__(self) -> Iterator[tuple[str, Any]]:
+        """Each robot's name and host."""
+
+    def tick(self, write: Callable[[Flush], None], lateness_s: float = 0.0) -> None:
+        """A whole tick of the world alone."""
 
 
-class OneRobotWorld:
-    """A world of one robot: a ``RobotHost`` (its simulation, bridge and ticks).
+class Ticker(Protocol):
+    """What a world's control needs of the tick driver (``heartbeat.driver.TickDriver``)."""
 
-    Pausing is the host's hold (``/websim/pause`` holds the same); stepping runs the held
-    robot's tick once after each tick of its schedule (``Schedule.tick_listeners``), so a
-    step publishes what a tick publishes, stamped as a tick is. Spawning and deleting need a
-    world of many robots: ``UnsupportedError`` here.
+    @property
+    def tick_listeners(self) -> list[Callable[[], None]]:
+        """Called after every tick of the server."""
 
-    Rights: the robot's admins (its token or the instructor's in a class; the admin token of
-    a single robot) may do anything in it: the world holds nothing of anybody else. A client
-    with the drive right (``Session.may_drive``) may move and reset the robot.
+    def write(self, flush: Flush) -> None:
+        """Write ``flush`` through the server's connections."""
+
+
+class Spawner(Protocol):
+    """Who makes and removes robots of a shared world (a class: ``Classroom``)."""
+
+    def spawn(self, name: str, pose: Pose2D, owner: str | None) -> None:
+        """Add robot ``name`` at ``pose`` (ConfigError: a taken name, no room there)."""
+
+    def delete(self, name: str) -> None:
+        """Remove robot ``name`` (KeyError: no such robot)."""
+
+    def owner(self, name: str) -> str | None:
+        """Who spawned robot ``name`` (None: the world's own, or the instructor)."""
+
+    def spawned(self, name: str) -> bool:
+        """Whether robot ``name`` was spawned while the world runs."""
+
+
+class WorldControl:
+    """A world's robots as the simulation services act on them: a ``WorldHost``.
+
+    Stepping a paused world runs one tick of it after each tick of the server
+    (``Ticker.tick_listeners``), so a step publishes what a tick publishes, stamped as a tick
+    is. Subclasses say what pausing holds and who may do what.
 
     Args:
-        host: the robot's host.
-        name: the robot's entity name (a class robot's name; ``robot`` for a single robot).
+        world: the world's host (its simulation and its robots' hosts).
+        name: the entity whose bridge these services are on (its robot).
+        ticker: the server's tick driver.
     """
 
     can_spawn = False
 
-    def __init__(self, host: _Host, name: str) -> None:
-        self._host = host
+    def __init__(self, world: _World, name: str, ticker: Ticker) -> None:
+        self._world = world
         self.name = name
+        self._ticker = ticker
         self._stopped = False
         self._stepping: _Stepping | None = None
 
-    def entities(self) -> list[Entity]:
-        """The robot."""
-        params = self._host.robot.sim.params
-        return [Entity(self.name, CATEGORY_ROBOT, ROBOT_DESCRIPTION, ROBOT_TAGS,
-                       params.footprint_radius_m,
-                       params.wheel_radius_m + CHASSIS_HEIGHT_M + LASER_HEIGHT_M)]
+    @property
+    def _host(self) -> _Host:
+        host: _Host = self._world.hosts[self.name]
+        return host
 
-    def _sim_of(self, name: str) -> VirtualRobot:
-        if name != self.name:
+    def entities(self) -> list[Entity]:
+        """Every robot of the world, in spawn order."""
+        return [self._entity(name, host) for name, host in self._world]
+
+    def _entity(self, name: str, host: _Host) -> Entity:
+        params = host.robot.sim.params
+        return Entity(name, CATEGORY_ROBOT, ROBOT_DESCRIPTION, ROBOT_TAGS,
+                      params.footprint_radius_m,
+                      params.wheel_radius_m + CHASSIS_HEIGHT_M + LASER_HEIGHT_M)
+
+    def _robot(self, name: str) -> VirtualRobot:
+        host: _Host | None = self._world.hosts.get(name)
+        if host is None:
             raise KeyError(name)
-        return self._host.robot
+        return host.robot
 
     def state(self, name: str) -> Odometry:
-        """The robot's ground truth (map frame)."""
-        return self._sim_of(name).sim.ground_truth()
+        """Robot ``name``'s ground truth (map frame)."""
+        return self._robot(name).sim.ground_truth()
 
     def teleport(self, name: str, pose: Pose2D) -> None:
-        """The robot at rest at ``pose``, its odometry reading as it was (it was carried)."""
-        robot = self._sim_of(name)
-        odometry = robot.sim.odometry()
-        robot.sim.place(pose, Pose2D(odometry.x, odometry.y, odometry.theta))
+        """Robot ``name`` at rest at ``pose``, its odometry reading as it was (carried)."""
+        self._robot(name).sim.teleport(pose)
 
     def reset_entity(self, name: str) -> None:
-        """The robot back at spawn (``/reset_simulation``'s reset)."""
-        self._sim_of(name).reset()
+        """Robot ``name`` back at its spawn (``/reset_simulation``'s reset)."""
+        self._robot(name).reset()
 
     def reset(self, *, spawned: bool) -> None:
-        """The robot back at spawn (nothing here was spawned)."""
-        self._host.robot.reset()
+        """Every robot back at its spawn."""
+        for _, host in self._world:
+            host.robot.reset()
 
     @property
     def paused(self) -> bool:
-        """Held by an admin (``/websim/pause``, ``SetSimulationState``)."""
-        return self._host.held
+        """Whether the world is held."""
+        raise NotImplementedError
+
+    def _hold(self, held: bool) -> None:
+        raise NotImplementedError
 
     @property
     def stopped(self) -> bool:
         """Held at its reset state since ``SetSimulationState`` STOPPED."""
-        return self._host.held and self._stopped
+        return self.paused and self._stopped
 
     def set_paused(self, paused: bool, *, stopped: bool = False) -> None:
-        """Hold or run the robot (what ``/websim/pause`` does)."""
-        self._host.held = paused
+        """Hold or run the world."""
+        self._hold(paused)
         self._stopped = paused and stopped
 
     def step(self, steps: int, progress: Progress) -> Cancel:
-        """Run ``steps`` ticks of the held robot, one after each tick of its schedule."""
-        if not self._host.held:
+        """Run ``steps`` ticks of the held world, one after each tick of the server."""
+        if not self.paused:
             raise ConfigError("the simulation is not paused (SetSimulationState "
                               "STATE_PAUSED first)")
         if self._stepping is not None:
@@ -253,20 +297,19 @@ class OneRobotWorld:
         stepping = _Stepping(self, steps, progress)
         self._stepping = stepping
         self._stopped = False
-        self._host.schedule.tick_listeners.append(stepping.tick)
+        self._ticker.tick_listeners.append(stepping.tick)
         return stepping.cancel
 
     def _run_step(self) -> None:
-        """One tick of the held robot."""
-        host = self._host
-        host.held = False
+        """One tick of the held world (the tick driver's tick of it alone)."""
+        self._hold(False)
         try:
-            host.tick()
+            self._world.tick(self._ticker.write)
         finally:
-            host.held = True
+            self._hold(True)
 
     def _end_stepping(self, stepping: _Stepping) -> None:
-        listeners = self._host.schedule.tick_listeners
+        listeners = self._ticker.tick_listeners
         if stepping.tick in listeners:
             listeners.remove(stepping.tick)
         if self._stepping is stepping:
@@ -275,16 +318,16 @@ class OneRobotWorld:
     def spawn(self, name: str, pose: Pose2D, owner: str | None) -> None:
         """Not in a world of one robot."""
         raise UnsupportedError("spawning needs a world of several robots (websim serve --class "
-                          "--arena); this world holds one robot")
+                               "--arena); this world holds one robot")
 
     def delete(self, name: str) -> None:
         """Not in a world of one robot."""
         raise UnsupportedError("deleting needs a world of several robots (websim serve --class "
-                          "--arena); this world holds one robot")
+                               "--arena); this world holds one robot")
 
     def start_pose(self) -> Pose2D:
-        """The world's start pose (the robot's spawn)."""
-        return self._host.robot.sim.world.start
+        """The world's start pose."""
+        return self._world.world.world.start
 
     def caller(self, session: Session) -> Caller:
         """Admins own this world; the drive right moves the robot."""
@@ -292,25 +335,115 @@ class OneRobotWorld:
                       drives=None if session.may_drive else frozenset())
 
     def stamp_s(self) -> float:
-        """The robot's clock's stamp."""
+        """The robots' clock's stamp."""
         return self._host.robot.clock.stamp_s()
 
     def answered(self) -> None:
-        """Write the bridge's queued frames through the schedule's writers."""
-        self._host.schedule.writers.write(self._host.bridge.take_flush())
+        """Write the bridge's queued frames through the server's connections."""
+        self._ticker.write(self._host.bridge.take_flush())
+
+
+class OneRobotWorld(WorldControl):
+    """A world of one robot (the single robot of ``websim serve``, a class robot's own).
+
+    Pausing is the host's hold (``/websim/pause`` holds the same). Spawning and deleting need
+    a world of many robots: ``UnsupportedError`` here.
+
+    Rights: the robot's admins (its token or the instructor's in a class; the admin token of
+    a single robot) may do anything in it: the world holds nothing of anybody else. A client
+    with the drive right (``Session.may_drive``) may move and reset the robot.
+    """
+
+    @property
+    def paused(self) -> bool:
+        """Held by an admin (``/websim/pause``, ``SetSimulationState``)."""
+        return self._host.held
+
+    def _hold(self, held: bool) -> None:
+        self._host.held = held
+
+    def reset(self, *, spawned: bool) -> None:
+        """The robot back at spawn (nothing here was spawned)."""
+        self._host.robot.reset()
+
+
+class SharedWorld(WorldControl):
+    """The world every robot of an arena shares (``--class --arena``), from one robot's bridge.
+
+    Pausing holds the whole world (``WorldSim.paused``); spawning adds a robot (the course's)
+    to the class, reachable at ``/robots/NAME`` as a student's is, and deleting removes one
+    that was spawned (``Spawner``: the class).
+
+    Rights: the instructor (the server's admin token) may do anything; a student, with their
+    robot's token, may move and reset their own robot only, and spawn up to ``spawn_quota``
+    robots (``--student-spawn``) and delete those; a connection without a token watches.
+
+    Args:
+        world: the arena's host.
+        name: the robot whose bridge offers these services.
+        ticker: the server's tick driver.
+        spawner: who makes and removes the arena's robots (the class).
+        spawn_quota: how many robots one student may have spawned at once.
+    """
+
+    can_spawn = True
+
+    def __init__(self, world: _World, name: str, ticker: Ticker, spawner: Spawner,
+                 spawn_quota: int = 0) -> None:
+        super().__init__(world, name, ticker)
+        self._spawner = spawner
+        self._quota = spawn_quota
+
+    def _entity(self, name: str, host: _Host) -> Entity:
+        entity = super()._entity(name, host)
+        return dataclasses.replace(entity, owner=self._spawner.owner(name),
+                                   spawned=self._spawner.spawned(name))
+
+    @property
+    def paused(self) -> bool:
+        """Whether the arena is held (every robot)."""
+        return self._world.world.paused
+
+    def _hold(self, held: bool) -> None:
+        self._world.world.paused = held
+
+    def reset(self, *, spawned: bool) -> None:
+        """Every robot back at its spawn; the spawned ones removed if ``spawned``."""
+        if spawned:
+            for name, _ in self._world:
+                if self._spawner.spawned(name):
+                    self._spawner.delete(name)
+        super().reset(spawned=spawned)
+
+    def spawn(self, name: str, pose: Pose2D, owner: str | None) -> None:
+        """A robot ``name`` at ``pose``, a robot of the class from now on."""
+        self._spawner.spawn(name, pose, owner)
+
+    def delete(self, name: str) -> None:
+        """Robot ``name`` out of the arena and the class."""
+        self._spawner.delete(name)
+
+    def caller(self, session: Session) -> Caller:
+        """The instructor may do anything; a student, their own robot and their spawns."""
+        if session.is_admin and session.instructor:
+            return Caller(admin=True, drives=None)
+        if session.is_admin or session.may_drive:  # the robot's token (or an open class)
+            return Caller(admin=False, drives=frozenset({self.name}), name=self.name,
+                          spawn_quota=self._quota)
+        return Caller(admin=False, drives=frozenset())
 
 
 class _Stepping:
-    """One stepping request of a ``OneRobotWorld``: runs after each tick of its schedule."""
+    """One stepping request of a world: runs after each tick of the server."""
 
-    def __init__(self, world: OneRobotWorld, steps: int, progress: Progress) -> None:
+    def __init__(self, world: WorldControl, steps: int, progress: Progress) -> None:
         self._world = world
         self.left = steps
         self._done = 0
         self._progress = progress
 
     def tick(self) -> None:
-        """After a tick of the schedule: one step, or the end of the request."""
+        """After a tick of the server: one step, or the end of the request."""
         world = self._world
         if not world.paused:
             world._end_stepping(self)

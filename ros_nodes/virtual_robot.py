@@ -16,7 +16,7 @@ Parameters (``ros2 param describe /virtual_robot NAME`` shows each): ``mode``, `
 ``cmd_vel_timeout_s`` change at runtime; ``world``, ``params_file``, ``seed``, the noise
 sigmas, ``localization`` and ``cmd_vel_stamped`` are read at start (read-only afterwards). The
 node publishes ``/clock`` every tick, the stamp of the tick's messages: wall time, or with
-``use_sim_time:=true`` sim time (``rosbridge.core.clock.SimClock``: from the wall time of the
+``use_sim_time:=true`` sim time (``ros_nodes.sim_clock.SimClock``: from the wall time of the
 start, exactly one tick per tick, counting on across resets), which the node's own rclpy
 clock then follows too. Bad values are refused with the reason; nothing changes.
 """
@@ -72,9 +72,10 @@ from ros_nodes.robot_interface import (
     TopicSpec,
 )
 from ros_nodes.robot_messages import prefixed_frames
+from ros_nodes.sim_clock import SimClock
 from ros_nodes.tap import OUT
 from ros_nodes.virtual_robot_core import Publication, VirtualRobot
-from rosbridge.core.clock import SimClock, WallClock
+from rosbridge.core.clock import WallClock
 from rosbridge.msgs.rclpy_conversion import (
     MessageConversionError,
     PublisherFilter,
@@ -258,9 +259,6 @@ class VirtualRobotNode(Node):
 
         self.robot.parameters.listeners.append(self._on_robot_parameters_changed)
         self.robot.latched_listeners.append(self._publish_latched)
-        self._sim_clock = self.robot.clock if own_timer and \
-            isinstance(self.robot.clock, SimClock) else None
-        """The sim clock this node's timer moves (its robot's, when the node ticks it)."""
         if own_timer:
             # A steady clock: with use_sim_time the node's own clock follows /clock, which
             # this very timer publishes.
@@ -368,9 +366,7 @@ class VirtualRobotNode(Node):
     # ---- topics and services --------------------------------------------------------------
 
     def _tick(self) -> None:
-        if self._sim_clock is not None:
-            self._sim_clock.tick()
-        self.publish(self.robot.step())
+        self.publish(self.robot.step())  # a sim clock follows the world's ticks
 
     def publish(self, publications: Sequence[Publication]) -> None:
         """Publish the robot's messages (dicts) on the ROS graph; thread-safe."""

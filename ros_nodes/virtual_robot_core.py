@@ -34,9 +34,10 @@ from ros_nodes.robot_messages import (
     world_markers_msg,
 )
 from ros_nodes.sensors import Sensor, robot_sensors
+from ros_nodes.sim_clock import SimClock
 from ros_nodes.tap import IN, OUT, Tap
 from ros_nodes.urdf import robot_urdf
-from rosbridge.core.clock import Clock, SimClock, WallClock
+from rosbridge.core.clock import Clock, WallClock
 from rosbridge.msgs.values import Message
 
 Publication = tuple[TopicSpec, Message]
@@ -90,10 +91,14 @@ class VirtualRobot:
         self.parameters = RobotParameters(sim)
         self.tap = Tap()
         self.clock: Clock = WallClock() if clock is None else clock
+        if isinstance(self.clock, SimClock) and not self.clock.following:
+            world = sim.world_sim
+            self.clock.follow(lambda: world.tick)  # the one tick counter: its world's
         self._command_s: float | None = None
         """When the last command arrived (``watchdog_s``); None: none yet."""
         self.collisions = 0
-        """Times the robot ran into a wall (ticks where a contact began) since it started."""
+        """Times the robot ran into a wall or another robot (ticks where a contact began)
+        since it started."""
         self._colliding = False
         self.latched_listeners: list[LatchedListener] = []
         self._urdf = self.urdf()
@@ -152,6 +157,16 @@ class VirtualRobot:
     def advance(self) -> None:
         """Advance the simulation one tick (stopping a command past its timeout first).
 
+        ``before_step``, its world's ``step``, ``after_step``: what the tick driver does for
+        every robot of a world around the world's one step.
+        """
+        self.before_step()
+        self.sim.step()
+        self.after_step()
+
+    def before_step(self) -> None:
+        """Before its world steps: a command past its timeout is replaced by a stop.
+
         The watchdog (``cmd_vel_timeout_s`` > 0) measures the last command's age on the
         robot's clock (``watchdog_s``: wall time, or simulated time where the clock
         runs on it), so the robot stops at the first tick at least the timeout after the
@@ -162,7 +177,9 @@ class VirtualRobot:
                 self.watchdog_s() - self._command_s >= timeout_s - TIMEOUT_TOLERANCE_S:
             self._command_s = None  # stopped: nothing left to expire
             self.sim.command(0.0, 0.0)
-        self.sim.step()
+
+    def after_step(self) -> None:
+        """After its world stepped: count a contact that began (``collisions``)."""
         collided = self.sim.state().collided
         if collided and not self._colliding:
             self.collisions += 1

@@ -48,7 +48,7 @@ class Rig(RobotRig):
                  latched: LatchedBytes | None = None) -> None:
         rig = robot_rig("empty", lidar=lidar, clock=Clock(),  # type: ignore[arg-type]
                         latched=latched)
-        super().__init__(rig.host, rig.clock)
+        super().__init__(rig.host, rig.clock, rig.world)
 
     @property
     def endpoint(self) -> RobotEndpoint:
@@ -56,9 +56,9 @@ class Rig(RobotRig):
         return self.host.endpoint
 
     def tick(self, n: int = 1, lateness_s: float = 0.0) -> None:
-        """``n`` host ticks at the clock's present time."""
+        """``n`` ticks of its world at the clock's present time."""
         for _ in range(n):
-            self.host.tick(lateness_s)
+            self.tick_now(lateness_s)
 
 
 def topics_of(frames: list[Any]) -> list[str]:

@@ -1,14 +1,17 @@
 """One rig for driving a robot's ticks in unit tests: a robot, its host and bridge, one clock.
 
 ``robot_rig()`` builds what ``websim serve`` builds for one robot (``VirtualRobot`` on a
-``Simulation``, its ``RobotHost`` with its bridge and endpoint) on a ``ManualClock``, without
-sockets or an event loop: the test connects sessions, feeds them frames and ticks by hand.
+``Simulation``, its world's ``WorldHost`` and the robot's ``RobotHost`` with its bridge and
+endpoint) on a ``ManualClock``, without sockets or an event loop: the test connects sessions,
+feeds them frames and ticks the world by hand (``WorldHost.tick``, what the tick driver does
+for each world).
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import cbor2
@@ -16,11 +19,12 @@ import cbor2
 from physics import LidarParams, NoiseParams, Simulation, load_world
 from ros_nodes.robot_host import RobotHost
 from ros_nodes.virtual_robot_core import VirtualRobot
+from ros_nodes.world_host import WorldHost
 from rosbridge.core.bridge import Bridge
 from rosbridge.core.clock import ManualClock
 from rosbridge.core.limits import LatchedBytes
 from rosbridge.core.outbox import Outbox
-from rosbridge.core.session import Session
+from rosbridge.core.session import Flush, Session
 
 
 @dataclass
@@ -30,10 +34,17 @@ class RobotRig:
     Attributes:
         host: the robot's host (its bridge, endpoint, statistics).
         clock: the robot's one clock; it moves only when the test (or ``tick``) says.
+        world: the host of the robot's world (what the tick driver ticks).
     """
 
     host: RobotHost
     clock: ManualClock
+    world: WorldHost
+    tick_listeners: list[Callable[[], None]] = field(default_factory=list)
+    """Called after every tick, as the tick driver calls its own (``TickDriver``)."""
+
+    def write(self, flush: Flush) -> None:
+        """The tick driver's write: nothing to write here (frames stay in the outboxes)."""
 
     @property
     def robot(self) -> VirtualRobot:
@@ -57,10 +68,20 @@ class RobotRig:
         self.bridge.handle(session, message if isinstance(message, (str, bytes))
                            else json.dumps(message))
 
+    def tick_now(self, lateness_s: float = 0.0) -> None:
+        """One tick of its world at the clock's present time (the clock is not moved), then
+        the tick listeners, as the tick driver runs them."""
+        self.world.tick(_ignore, lateness_s)
+        for listener in list(self.tick_listeners):
+            listener()
+
     def tick(self, n: int = 1, lateness_s: float = 0.0) -> None:
-        """``n`` host ticks, the clock moving one tick period (``dt_s``) after each."""
+        """``n`` ticks of its world, the clock moving one tick period (``dt_s``) after each.
+
+        Frames go to the sessions' outboxes (no connection writes them here).
+        """
         for _ in range(n):
-            self.host.tick(lateness_s)
+            self.tick_now(lateness_s)
             self.clock.advance(self.robot.sim.dt_s)
 
     @staticmethod
@@ -102,5 +123,9 @@ def robot_rig(world: str = "empty", *, seed: int = 0, mode: str = "kinematic",
     """
     clock = ManualClock() if clock is None else clock
     sim = Simulation(load_world(world), seed=seed, mode=mode, lidar=lidar, noise=noise)
-    return RobotRig(RobotHost(VirtualRobot(sim, clock), idle_pause_s=idle_pause_s,
-                              latched=latched), clock)
+    world_host, host = WorldHost.of(VirtualRobot(sim, clock), idle_pause_s, latched)
+    return RobotRig(host, clock, world_host)
+
+
+def _ignore(flush: Flush) -> None:
+    """No connection to write: the frames stay in the sessions' outboxes for the test."""

@@ -356,18 +356,19 @@ def test_a_robot_nobody_uses_pauses_and_resumes_with_its_state(tmp_path: Path) -
         server.stop()
 
 
-# ---- in-process: one schedule, scans only when wanted ----------------------------------------
+# ---- in-process: one tick driver, a world each, scans only when wanted -----------------
 
 def test_a_scan_is_cast_only_when_someone_subscribes_to_it() -> None:
-    host = robot_rig("maze").host
+    rig = robot_rig("maze")
+    host = rig.host
     for _ in range(10):
-        host.tick()
+        rig.tick_now()
     assert host.stats.scans_cast == 0
     session = Session("reader", False)
     host.bridge.connect(session)
     host.bridge.handle(session, json.dumps({"op": "subscribe", "topic": "/scan"}))
     for _ in range(10):
-        host.tick()
+        rig.tick_now()
     assert host.stats.scans_cast == 5
 
 
@@ -382,7 +383,9 @@ def test_classroom_robots_are_independent_objects() -> None:
     (_, first_host), (_, second_host) = list(classroom)
     assert first_host.bridge is not second_host.bridge
     assert first_host.robot.sim is not second_host.robot.sim
-    assert first_host.schedule is second_host.schedule is classroom.schedule
+    assert classroom.world("robot01") is not classroom.world("robot02"), "a world each"
+    assert classroom.world("robot01").world is first_host.robot.sim.world_sim
+    assert classroom.driver.worlds == [classroom.world("robot01"), classroom.world("robot02")]
     assert classroom.get("robot03") is None, "a closed class enrols nobody"
     assert classroom.is_robot_token("robot01", classroom.token("robot01"))
     assert not classroom.is_robot_token("robot02", classroom.token("robot01"))

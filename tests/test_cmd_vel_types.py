@@ -188,7 +188,7 @@ def test_the_watchdog_stops_within_the_timeout_and_one_tick(timeout_s: float,
     rig.send(watcher, {"op": "subscribe", "topic": "/odom"})
     advertise(rig, nav2, STAMPED)
     rig.tick(3)
-    rig.host.tick()  # a tick, then the command offset_s after it, between two ticks
+    rig.tick_now()  # a tick, then the command offset_s after it, between two ticks
     dt_s = rig.robot.sim.dt_s
     rig.clock.advance(offset_s)
     sent_s = rig.clock.stamp_s()

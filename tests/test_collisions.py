@@ -61,7 +61,7 @@ def test_kinematic_turns_in_place_and_drives_along_a_wall(arena: World) -> None:
 @pytest.mark.parametrize("heading_deg", [0, 10, 37, 45, 89, 135, 200, 271])
 def test_footprint_never_passes_a_wall(arena: World, mode: str, heading_deg: float) -> None:
     sim = make_sim(arena, mode=mode)
-    sim._robot.teleport(Pose2D(0.0, 0.0, math.radians(heading_deg)))
+    sim.teleport(Pose2D(0.0, 0.0, math.radians(heading_deg)))
     sim.command(0.5, 0.0)
     clearances = []
     for _ in range(20 * 20):
@@ -94,7 +94,7 @@ def test_random_driving_in_the_maze_stays_clear_of_every_wall() -> None:
     rng = np.random.default_rng(3)
     for mode in ("kinematic", "dynamic"):
         sim = Simulation(world, mode=mode, seed=0)
-        space = sim._world_space.space
+        space = sim.world_sim.space.space
         for _ in range(60):
             sim.command(rng.uniform(-0.5, 0.5), rng.uniform(-2.5, 2.5))
             for _ in range(10):

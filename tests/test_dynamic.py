@@ -99,7 +99,7 @@ def test_wheels_do_not_slip_sideways(open_world: World) -> None:
     sim.command(0.5, 2.5)
     for _ in range(60):
         sim.step()
-        body = sim._robot._body  # the pymunk body: its velocity must point along the heading
+        body = sim.model._body  # the pymunk body: its velocity must point along the heading
         heading = body.rotation_vector
         lateral = body.velocity.cross(heading)
         # Contact-free: sideways velocity is only the rotation within the last substep.

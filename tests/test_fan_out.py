@@ -22,7 +22,6 @@ from websockets.frames import Opcode
 from websockets.streams import StreamReader
 
 from physics import Simulation, load_world
-from ros_nodes.robot_server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Session
 from rosbridge.core.clock import ManualClock
@@ -30,6 +29,7 @@ from rosbridge.core.outbox import Outbox
 from rosbridge.transport.front import start_websocket
 from rosbridge.transport.wire import WireFrames, serialize
 from rosbridge.transport.writers import Writers
+from websim.robot_server import SimServer
 
 TWIST = {"linear": {"x": 0.1, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
 
@@ -251,7 +251,7 @@ def test_a_throttle_counts_from_when_ticks_were_due_so_late_ticks_lose_nothing()
     for tick, late_s in enumerate(lateness):
         clock.advance(100.0 + 0.05 * tick + late_s - clock.monotonic_s())
         queued = len(watcher.outbox)
-        host.tick(late_s)
+        rig.tick_now(late_s)
         if len(watcher.outbox) > queued:
             delivered.append(tick)
     assert delivered == list(range(0, len(lateness), 4))  # every fourth tick, on the grid

@@ -21,9 +21,9 @@ import websockets
 
 from physics import Pose2D, Simulation, load_world
 from ros_nodes.robot_interface import ODOM
-from ros_nodes.robot_server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.transport.front import start_websocket
+from websim.robot_server import SimServer
 
 from server_process import free_port
 from ws_clients import OdomListener
@@ -81,7 +81,7 @@ def assert_recovered(health: dict[str, Any], rate_hz: float, server: SimServer,
 
 def test_a_physics_exception_in_a_step_is_caught_and_the_robot_reset() -> None:
     def fault(server: SimServer) -> None:
-        raise_once(server.robot.sim, "step", RuntimeError("pymunk blew up"))
+        raise_once(server.robot.sim.world_sim, "step", RuntimeError("pymunk blew up"))
 
     health, rate_hz, server = asyncio.run(run_with_fault(fault))
     assert_recovered(health, rate_hz, server, "stepping the robot: RuntimeError")
@@ -91,7 +91,7 @@ def test_a_physics_exception_in_a_step_is_caught_and_the_robot_reset() -> None:
 @pytest.mark.parametrize("mode", ["kinematic", "dynamic"])
 def test_a_state_gone_non_finite_is_reset_to_spawn(mode: str) -> None:
     def fault(server: SimServer) -> None:
-        server.robot.sim._robot.teleport(Pose2D(math.nan, math.inf, 0.0))
+        server.robot.sim.model.teleport(Pose2D(math.nan, math.inf, 0.0))
 
     health, rate_hz, server = asyncio.run(run_with_fault(fault, mode=mode))
     assert_recovered(health, rate_hz, server, "stepping the robot: FloatingPointError")

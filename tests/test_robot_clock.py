@@ -26,10 +26,10 @@ def test_the_clock_stamps_the_messages_and_ages_the_last_command() -> None:
 def test_the_clock_times_the_idle_pause() -> None:
     rig = robot_rig(idle_pause_s=1.0)
     host, clock = rig.host, rig.clock
-    host.tick()
+    rig.tick_now()
     clock.advance(0.99)
-    host.tick()
+    rig.tick_now()
     assert (host.stats.ticks, host.stats.paused) == (2, False)
     clock.advance(0.01)
-    host.tick()
+    rig.tick_now()
     assert (host.stats.ticks, host.stats.paused) == (2, True)

@@ -12,10 +12,10 @@ from robot_rig import RobotRig
 
 from physics import LidarParams, RobotParams, Simulation, load_world
 from ros_nodes.parameters import PARAMETER_DOUBLE, PARAMETER_STRING
-from ros_nodes.robot_host import RobotHost
 from ros_nodes.sensors import joint_states, odometry_transform
 from ros_nodes.urdf import LASER_HEIGHT_M, robot_urdf
 from ros_nodes.virtual_robot_core import VirtualRobot
+from ros_nodes.world_host import WorldHost
 from rosbridge.core.clock import ManualClock
 
 ROBOT = RobotParams(wheel_radius_m=0.05, wheelbase_m=0.23, footprint_radius_m=0.17,
@@ -28,7 +28,8 @@ def rig_of(robot: RobotParams = ROBOT, lidar: LidarParams = LIDAR,
     """What ``websim serve`` builds for a robot of these parameters, on a manual clock."""
     clock = ManualClock()
     sim = Simulation(load_world("empty"), robot, lidar=lidar, mode=mode, seed=0)
-    return RobotRig(RobotHost(VirtualRobot(sim, clock)), clock)
+    world, host = WorldHost.of(VirtualRobot(sim, clock))
+    return RobotRig(host, clock, world)
 
 
 def numbers(element: ET.Element, attribute: str) -> list[float]:

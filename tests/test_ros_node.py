@@ -41,8 +41,8 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from physics import RobotParams, Simulation, load_world  # noqa: E402
 from ros_nodes.parameters import PARAMETER_DOUBLE  # noqa: E402
-from ros_nodes.robot_interface import PUBLISHED_TOPICS  # noqa: E402
-from ros_nodes.robot_messages import Float32Sequence  # noqa: E402
+from ros_nodes.robot_interface import PUBLISHED_TOPICS, WORLD_ROBOTS  # noqa: E402
+from ros_nodes.robot_messages import Float32Sequence, world_robots_msg  # noqa: E402
 from ros_nodes.virtual_robot import TF_MISSING_WARNING  # noqa: E402
 from ros_nodes.virtual_robot_core import VirtualRobot  # noqa: E402
 from rosbridge.msgs.rclpy_conversion import (  # noqa: E402
@@ -88,6 +88,9 @@ def test_every_robot_message_converts_and_comes_back_unchanged() -> None:
     robot = VirtualRobot(Simulation(load_world("maze"), seed=0))
     robot.on_cmd_vel({"linear": {"x": 0.2}, "angular": {"z": 0.4}})
     publications = robot.latched() + robot.step() + robot.step()
+    world = robot.sim.world_sim  # and the world's own message, built once for its robots
+    publications.append((WORLD_ROBOTS, world_robots_msg(
+        world.names, world.poses().tolist(), world.footprints()[:, 2].tolist(), 1.5)))
     assert {spec.name for spec, _ in publications} == {topic.name for topic in PUBLISHED_TOPICS}
     for spec, msg in publications:
         if spec.type.startswith("tf2_msgs/") and not HAS_TF2_MSGS:

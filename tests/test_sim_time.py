@@ -20,10 +20,11 @@ import pytest
 import roslibpy
 from robot_rig import robot_rig
 
+from heartbeat.schedule import CLIENT_WAIT_S
 from physics.params import SHIPPED_PARAMS_FILE
-from rosbridge.core.clock import MAX_SPEED, MIN_SPEED, SPEED_MAX, ManualClock, SimClock
+from ros_nodes.sim_clock import MAX_SPEED, MIN_SPEED, SPEED_MAX, SimClock
+from rosbridge.core.clock import ManualClock
 from rosbridge.core.limits import ClientLimits
-from rosbridge.transport.schedule import CLIENT_WAIT_S
 from websim.cli import main, make_simulation
 
 from server_process import roslibpy_client, start_server, wait_for
@@ -55,14 +56,17 @@ def test_sim_time_starts_at_the_wall_time_of_the_start_and_moves_one_tick_per_ti
     wall.advance(3.0)
     assert clock.stamp_s() == 1_700_000_005.0  # wall time passing moves no stamp
     assert clock.monotonic_s() == 8.0  # intervals are wall time
+    rig = robot_rig(clock=clock)  # type: ignore[arg-type]
+    assert clock.following, "the robot's world's ticks: the one tick counter"
     for _ in range(3):
-        clock.tick()
+        rig.tick_now()
+    assert clock.ticks == rig.robot.sim.world_sim.tick == 3
     assert clock.stamp_s() == pytest.approx(1_700_000_005.15, abs=1e-6)
 
 
 def test_stamps_of_sim_time_are_exact_to_the_nanosecond_after_days() -> None:
-    clock = SimClock(0.05, epoch_s=1_767_225_600.123456)
-    clock.ticks = 20 * 86_400 * 3 + 1  # three days of ticks, and one
+    clock = SimClock(0.05, epoch_s=1_767_225_600.123456,
+                     ticks=lambda: 20 * 86_400 * 3 + 1)  # three days of ticks, and one
     rig = robot_rig(clock=clock)  # type: ignore[arg-type]
     admin = rig.client(admin=True)
     now = rig.call(admin, "/rosapi/get_time")["values"]["time"]
@@ -84,8 +88,7 @@ def test_every_message_of_a_tick_is_stamped_with_the_time_clock_says() -> None:
         rig.send(client, {"op": "subscribe", "topic": topic})
     published: list[dict[str, Any]] = []
     for _ in range(4):
-        clock.tick()  # what the schedule does before each tick
-        rig.host.tick()
+        rig.tick_now()  # the world steps: its tick is the clock's
         published += [frame for frame in rig.drain(client) if frame.get("op") == "publish"]
     clocks = [stamp_ns(f["msg"]["clock"]) for f in published if f["topic"] == "/clock"]
     assert clocks == [1_700_000_000_000_000_000 + n * TICK_NS for n in (1, 2, 3, 4)]
@@ -109,8 +112,7 @@ def test_the_cmd_vel_watchdog_counts_sim_time_whatever_the_wall_clock_does() -> 
     xs = []
     for _ in range(30):
         wall.advance(5.0)  # wall time races ahead: the watchdog does not read it
-        clock.tick()
-        rig.host.tick()
+        rig.tick_now()
         xs.append(rig.robot.sim.ground_truth().x)
     steps = [b - a for a, b in itertools.pairwise([0.0, *xs])]
     # 0.5 s of sim time at 0.3 m/s: ten ticks of 15 mm, then it stands (as at real time).
@@ -281,7 +283,9 @@ def test_at_max_speed_a_stalled_client_is_released_and_the_others_lose_nothing()
 # ---- a class -------------------------------------------------------------------------------
 
 
-def test_every_robot_of_a_class_runs_on_the_one_clock_at_its_speed() -> None:
+def test_each_robot_of_a_class_runs_on_its_own_clock_at_the_class_speed() -> None:
+    """A world each, a pace each (``test_pace.py``), all from the one start: sim time
+    counts each world's ticks from the same epoch."""
     server = start_server(["--class", "2", "--speed", "20"])
     try:
         clocks: dict[str, list[int]] = {"robot01": [], "robot02": []}
@@ -303,7 +307,8 @@ def test_every_robot_of_a_class_runs_on_the_one_clock_at_its_speed() -> None:
         server.stop()
     for received in clocks.values():
         assert consecutive(received[:200])
-    assert set(clocks["robot01"]) & set(clocks["robot02"])  # one clock: the same ticks
+    epochs = {(received[0] - TICK_NS) % TICK_NS for received in clocks.values()}
+    assert len(epochs) == 1, "one epoch: the server's start"
     robots = health["robots"]
     assert {robot["speed"] for robot in robots.values()} == {20.0}
-    assert len({robot["ticks"] for robot in robots.values()}) == 1  # they tick together
+    assert all(robot["clients_released"] == 0 for robot in robots.values())

@@ -1,9 +1,9 @@
 """simulation_interfaces and turtlesim's names over the bridge, in-process (issue 29 §3).
 
 A real robot, host and bridge (``tests/robot_rig.py``) with the services ``websim serve``
-adds (``ros_nodes.simulation_services`` over ``OneRobotWorld``); the schedule's ticks are run
-as ``Schedule.run`` runs them (the host's tick, then the tick listeners, where stepping a
-paused world happens). Result codes are the standard's (``simulation_interfaces/msg/Result``
+adds (``ros_nodes.simulation_services`` over ``OneRobotWorld``); the ticks are run as the tick
+driver runs them (the world's tick, then the tick listeners, where stepping a paused world
+happens). Result codes are the standard's (``simulation_interfaces/msg/Result``
 and each service's own); a request that does not fit its type fails the call.
 """
 
@@ -40,16 +40,13 @@ RESET = "/websim/reset_simulation"
 @pytest.fixture
 def rig() -> RobotRig:
     rig = robot_rig("empty")
-    add_simulation_services(rig.bridge, OneRobotWorld(rig.host, "robot"))
+    add_simulation_services(rig.bridge, OneRobotWorld(rig.world, "robot", rig))
     return rig
 
 
 def ticks(rig: RobotRig, n: int) -> None:
-    """``n`` ticks of the schedule: the host's tick, then its listeners (``Schedule.run``)."""
-    for _ in range(n):
-        rig.tick()
-        for listener in list(rig.host.schedule.tick_listeners):
-            listener()
+    """``n`` ticks of the tick driver: the world's tick, then its listeners."""
+    rig.tick(n)
 
 
 def values(rig: RobotRig, session: Session, service: str, args: Any = None) -> Any:

@@ -63,14 +63,15 @@ def test_a_stamped_command_is_tapped_with_its_type_and_a_refused_one_not_at_all(
 
 
 def test_the_tap_sees_what_a_client_sends_through_the_bridge_and_all_the_robot_builds() -> None:
-    host: RobotHost = robot_rig().host
+    rig = robot_rig()
+    host: RobotHost = rig.host
     heard = recording(host.robot)
     client = Session("driver", False)
     host.bridge.connect(client)
     host.bridge.handle(client, json.dumps({"op": "publish", "topic": "/cmd_vel",
                                            "msg": TWIST}))
-    host.tick()
-    host.tick()  # nobody subscribes, yet the tap gets every message, /scan included
+    rig.tick_now()
+    rig.tick_now()  # nobody subscribes, yet the tap gets every message, /scan included
     topics: list[Any] = [(direction, topic) for direction, topic, *_ in heard]
     per_tick = [(OUT, "/clock"), (OUT, "/odom"), (OUT, "/tf"), (OUT, "/ground_truth"),
                 (OUT, "/joint_states")]

@@ -12,14 +12,14 @@ import json
 import time
 from typing import Any
 
+from heartbeat.schedule import Schedule
 from physics import Simulation, load_world
 from ros_nodes.robot_host import SHED_SCANS_AFTER_S
-from ros_nodes.robot_server import SimServer
 from ros_nodes.virtual_robot_core import VirtualRobot
 from rosbridge.core.bridge import Session
 from rosbridge.core.outbox import Outbox
 from rosbridge.core.schema import MAX_QUEUE_LENGTH
-from rosbridge.transport.schedule import Schedule
+from websim.robot_server import SimServer
 
 TICKS = 40
 

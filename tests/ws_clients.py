@@ -68,15 +68,17 @@ class NonReader:
     Args:
         port: the server's WebSocket port on 127.0.0.1.
         receive_buffer: the socket's SO_RCVBUF (bytes), set before connecting.
+        path: the WebSocket path (a class robot's: ``/robots/NAME``).
     """
 
-    def __init__(self, port: int, receive_buffer: int = 4096) -> None:
+    def __init__(self, port: int, receive_buffer: int = 4096, path: str = "/") -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer)
         self.sock.settimeout(5)
         self.sock.connect(("127.0.0.1", port))
         key = base64.b64encode(os.urandom(16)).decode()
-        self.sock.sendall((f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+        self.sock.sendall((f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n"
+                           "Upgrade: websocket\r\n"
                            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
                            "Sec-WebSocket-Version: 13\r\n\r\n").encode())
         response = b""
@@ -101,6 +103,23 @@ class NonReader:
             header += bytes([0x80 | 127]) + struct.pack(">Q", len(payload))
         masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
         self.sock.sendall(header + mask + masked)
+
+    def read_available(self, limit_bytes: int = 1 << 24) -> int:
+        """Read whatever the socket holds now, without waiting; the bytes read."""
+        self.sock.setblocking(False)
+        read = 0
+        try:
+            while read < limit_bytes:
+                chunk = self.sock.recv(1 << 16)
+                if not chunk:
+                    break
+                read += len(chunk)
+        except BlockingIOError:
+            pass
+        finally:
+            self.sock.setblocking(True)
+            self.sock.settimeout(5)
+        return read
 
     def is_closed_by_server(self) -> bool:
         """Whether the server closed or aborted the connection (reads what is left)."""

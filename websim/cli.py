@@ -7,24 +7,26 @@ import importlib.metadata
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from classroom import nginx_config
 from classroom.registry import Student, check_name, strong_token, weak_token
-from physics import MODES, TICK_PERIOD_S, ConfigError, Simulation, load_params, load_world
+from physics import (
+    MODES,
+    TICK_PERIOD_S,
+    ConfigError,
+    Simulation,
+    WorldSim,
+    load_params,
+    load_world,
+)
 from physics.params import SHIPPED_PARAMS_FILE
+from physics.simulation import SINGLE_ROBOT
 from physics.world import WORLDS_DIR
 from ros_nodes.robot_description import robot_json
+from ros_nodes.sim_clock import MAX_SPEED, MIN_SPEED, SPEED_MAX, SimClock
 from ros_nodes.virtual_robot_core import VirtualRobot
-from rosbridge.core.clock import (
-    MAX_SPEED,
-    MIN_SPEED,
-    SPEED_MAX,
-    WALL_CLOCK,
-    Clock,
-    SimClock,
-    WallClock,
-)
+from rosbridge.core.clock import WALL_CLOCK, Clock, WallClock
 from websim import compare_command, compare_real, fit_command, grade_command, map_command, sites
 from websim import replay as replay_command
 from websim import serve as serve_command
@@ -166,8 +168,8 @@ def _add_sim_arguments(parser: argparse.ArgumentParser, *, mode: bool = True) ->
     parser.add_argument("--seed", type=int, default=0, help="random seed for noise (default 0)")
 
 
-def make_simulation(args: argparse.Namespace) -> Simulation:
-    """Build the simulation the common arguments describe.
+def make_simulation(args: argparse.Namespace, name: str = SINGLE_ROBOT) -> Simulation:
+    """Build the simulation the common arguments describe, its robot named ``name``.
 
     The world's ``noise`` section, if any, overrides the parameter file's sigmas.
     """
@@ -175,7 +177,7 @@ def make_simulation(args: argparse.Namespace) -> Simulation:
     world = load_world(args.world)
     return Simulation(world, platform.robot, mode=args.mode, seed=args.seed,
                       lidar=world.lidar_over(platform.lidar),
-                      noise=world.noise_over(platform.noise))
+                      noise=world.noise_over(platform.noise), name=name)
 
 
 def parse_speed(text: str) -> float:
@@ -200,9 +202,12 @@ def parse_speed(text: str) -> float:
     return speed
 
 
-def make_clock(speed: float | None) -> Clock:
-    """The server's one clock: wall time (no ``--speed``), else sim time at ``speed``."""
-    return WallClock() if speed is None else SimClock(TICK_PERIOD_S, speed)
+def make_clock(speed: float | None, epoch_s: float | None = None) -> Clock:
+    """A robot's clock: wall time (no ``--speed``), else sim time at ``speed``.
+
+    Sim time starts at ``epoch_s`` (default: the wall time now) and follows its world's ticks.
+    """
+    return WallClock() if speed is None else SimClock(TICK_PERIOD_S, speed, epoch_s)
 
 
 def _run_demo(args: argparse.Namespace) -> int:
@@ -266,25 +271,85 @@ def _run_serve(args: argparse.Namespace) -> int:
                           "--public-ws-port (the proxy's ports): with one, the links would mix "
                           "this process's port with the proxy's")
     limits, origins = serve_command.limits_from(args), serve_command.origins_from(args)
-    clock = make_clock(args.speed)  # the one clock of the server: every robot's, the class's
+    clock = make_clock(args.speed)  # the server's: the single robot's, a class's intervals
     recorder = serve_command.recorder_from(args)
+    if args.arena and args.class_spec is None:
+        raise ConfigError("--arena puts a class's robots in one world: it needs --class")
+    if args.student_spawn and not args.arena:
+        raise ConfigError("--student-spawn is for an arena: it needs --class and --arena")
+    if not 0 <= args.student_spawn <= MAX_STUDENT_SPAWN:
+        raise ConfigError(f"--student-spawn: from 0 to {MAX_STUDENT_SPAWN}, got "
+                          f"{args.student_spawn}")
     if args.class_spec is None:
         token = args.admin_token or strong_token()
         robot = VirtualRobot(make_simulation(args), clock, localization=args.localization)
         site = sites.single_robot(robot, token, limits, origins,
                                   args.public_ws_port or args.ws_port, recorder)
         return serve_command.run(args, site, token)
-
-    def make_robot(student: Student) -> VirtualRobot:
-        world = args.world if student.world is None else student.world
-        return VirtualRobot(make_simulation(argparse.Namespace(**{**vars(args),
-                                                                 "world": world})), clock,
-                            localization=args.localization)
+    make_robot = arena_robots(args, clock) if args.arena else class_robots(args, clock)
 
     platform = load_params(args.params)
     site = sites.classroom_site(args, make_robot, (platform.robot, platform.lidar),
                                 args.admin_token, limits, origins, clock, recorder)
     return serve_command.run(args, site, site.admin_token)  # given, kept, or new
+
+
+MAX_STUDENT_SPAWN = 20
+"""Most robots one student may have spawned into an arena at once (``--student-spawn``)."""
+
+
+def class_robots(args: argparse.Namespace, clock: Clock) -> Callable[[Student], VirtualRobot]:
+    """``--class``: each student's robot in a world of its own (the roster's, or ``--world``).
+
+    On sim time each world keeps its own time and pace (all from the server's start), but a
+    class on the ROS graph has one ``/clock``: one clock, one pace for all.
+    """
+    epoch_s = clock.stamp_s()
+
+    def robot_clock() -> Clock:
+        return clock if args.speed is None or args.ros else make_clock(args.speed, epoch_s)
+
+    def make_robot(student: Student) -> VirtualRobot:
+        world = args.world if student.world is None else student.world
+        return VirtualRobot(make_simulation(argparse.Namespace(**{**vars(args),
+                                                                 "world": world}),
+                                            student.name),
+                            robot_clock(), localization=args.localization)
+
+    return make_robot
+
+
+def arena_robots(args: argparse.Namespace, clock: Clock) -> Callable[[Student], VirtualRobot]:
+    """``--class --arena``: every student's robot spawned into the one ``--world``.
+
+    A robot the world places (its ``robots`` list) starts where it says, with its parameters
+    over the parameter file's; the others at the nearest free place to the world's start.
+    Each robot's noise streams come from ``--seed`` and its name: the same seed, the same run.
+
+    Raises:
+        ConfigError: with ``--worker`` (one world cannot be split over processes).
+    """
+    if getattr(args, "worker", False):
+        raise ConfigError("--arena puts every robot in one world: it cannot be split over "
+                          "--worker processes")
+    platform = load_params(args.params)
+    world = load_world(args.world)
+    arena = WorldSim(world, seed=args.seed, lidar=world.lidar_over(platform.lidar),
+                     noise=world.noise_over(platform.noise))
+
+    def make_robot(student: Student) -> VirtualRobot:
+        if student.world is not None and student.world != args.world:
+            raise ConfigError(f"robot '{student.name}': the roster gives it the world "
+                              f"'{student.world}', but --arena puts every robot in --world")
+        placed = world.placed(student.name)
+        start = student.start or (None if placed is None else placed.start)
+        arena.spawn(student.name, start,
+                    platform.robot if placed is None else placed.params_over(platform.robot),
+                    mode=args.mode)
+        return VirtualRobot(Simulation.of(arena, student.name), clock,
+                            localization=args.localization)
+
+    return make_robot
 
 
 def _run_replay(args: argparse.Namespace) -> int:

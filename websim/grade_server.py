@@ -52,9 +52,9 @@ from physics import TICK_PERIOD_S, ConfigError, RobotParams, Simulation, load_pa
 from physics.params import NoiseParams
 from ros_nodes.recording import Recorder
 from ros_nodes.robot_interface import CLOCK, PUBLISHED_TOPICS, RESET_SERVICE, SCAN
+from ros_nodes.sim_clock import MAX_SPEED, SPEED_MAX, SimClock
 from ros_nodes.tap import IN, OUT
 from ros_nodes.virtual_robot_core import VirtualRobot
-from rosbridge.core.clock import MAX_SPEED, SPEED_MAX, SimClock
 from rosbridge.core.limits import ClientLimits, OriginPolicy
 from rosbridge.msgs.values import Message
 from websim import serve as serve_command

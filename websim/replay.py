@@ -36,6 +36,7 @@ from rosbags.interfaces import QosDurability
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
 
+from heartbeat.schedule import Schedule
 from physics import TICK_PERIOD_S, ConfigError
 from physics.validation import shown
 from ros_nodes.bag_bounds import check_bag
@@ -52,7 +53,6 @@ from rosbridge.msgs import cdr, definitions
 from rosbridge.msgs.checks import MessageError
 from rosbridge.msgs.values import Message
 from rosbridge.transport.front import Destination, WebSocketFront
-from rosbridge.transport.schedule import Schedule
 from websim.sites import REPLAY_SERVICE, REPLAY_SERVICE_TYPE, Site
 
 log = logging.getLogger("websim.replay")
@@ -174,7 +174,9 @@ class Recording:
 
 
 class ReplayHost:
-    """A recording's bridge and the ticks that publish what falls due (a ``Destination``).
+    """A recording's bridge and the ticks that publish what falls due.
+
+    Its own ``Schedule``: a replay has no world to tick.
 
     Args:
         recording: the recording to play.
@@ -364,7 +366,7 @@ class ReplayServer(WebSocketFront):
 
     def route(self, path: str) -> tuple[Destination, str | None] | str:
         """The one recording, whatever the path."""
-        return self.host, None
+        return Destination(self.host.bridge, self.host.schedule), None
 
     async def run_ticks(self) -> None:
         """Play the recording."""

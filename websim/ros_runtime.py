@@ -33,6 +33,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
+from heartbeat.driver import TickDriver
 from ros_nodes.robot_interface import CLOCK
 from ros_nodes.robot_messages import clock_msg
 from ros_nodes.simulation_node import SimulationNode
@@ -46,7 +47,6 @@ from rosbridge.graph.relay import GraphRelay, LoopAccess
 from rosbridge.graph.services import GraphServices
 from rosbridge.msgs.rclpy_conversion import message_class, to_message
 from rosbridge.msgs.values import Message
-from rosbridge.transport.schedule import Schedule
 from rosbridge.transport.writers import Writers
 
 
@@ -71,7 +71,7 @@ class RosRuntime:
         robot: the robot the server ticks.
         bridge: the server's bridge, which gets the relay attached.
         loop: the server's event loop.
-        writers: where the bridge's flushes are written (the server's ``Schedule.writers``):
+        writers: where the bridge's flushes are written (the tick driver's ``writers``):
             a graph topic's messages, an action's or a graph service's answers and the robot
             node's parameter events go out at once. None: with the next tick
             (``Writers.sweep``).
@@ -173,18 +173,19 @@ class ClassRosRuntime:
     browsers' rosbridge topics are not relayed to the graph in a class (each robot's page
     talks to its bridge; the graph talks to its node).
 
-    The class has one clock, so one ``/clock`` (at the root, what ``use_sim_time`` nodes
-    read): published after every tick of the class's schedule by the node
-    ``/CLOCK_NODE_NAME``, not by each robot's node.
+    The class has one clock on the graph (its robots share one: ``websim serve --ros``), so
+    one ``/clock`` (at the root, what ``use_sim_time`` nodes read): published after every
+    tick of the class's tick driver by the node ``/CLOCK_NODE_NAME``, not by each robot's
+    node.
 
     Args:
         robots: (name, robot) of every robot of the class.
         loop: the server's event loop.
-        schedule: the class's tick schedule (its clock is the class's).
+        schedule: the class's tick driver.
     """
 
     def __init__(self, robots: list[tuple[str, VirtualRobot]],
-                 loop: asyncio.AbstractEventLoop, schedule: Schedule) -> None:
+                 loop: asyncio.AbstractEventLoop, schedule: TickDriver) -> None:
         self.context = Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.nodes: list[VirtualRobotNode] = []
@@ -202,7 +203,7 @@ class ClassRosRuntime:
             raise
         clock_type = message_class(CLOCK.type)
         publisher = self.clock_node.create_publisher(clock_type, CLOCK.name, qos_profile(CLOCK))
-        clock = schedule.clock
+        clock = robots[0][1].clock if robots else schedule.clock
 
         def publish_clock() -> None:
             publisher.publish(to_message(clock_type, clock_msg(clock.stamp_s())))

@@ -31,8 +31,7 @@ from physics.shipped import shipped
 from physics.world import LOCALIZATIONS
 from ros_nodes.recording import DEFAULT_CLIENT_MB_PER_MIN, DEFAULT_MAX_MB, Recorder
 from ros_nodes.robot_interface import NODE_NAME
-from ros_nodes.robot_server import SimServer
-from rosbridge.core.clock import SPEED_MAX
+from ros_nodes.sim_clock import SPEED_MAX
 from rosbridge.core.limits import ClientLimits, OriginPolicy, TrustedProxies
 from rosbridge.core.schema import NAME_TOKEN
 from rosbridge.graph.names import RELAY_NODE_NAME
@@ -40,6 +39,7 @@ from rosbridge.transport.front import start_websocket
 from websim.code_routes import code_routes
 from websim.http_server import start_http
 from websim.lan import lan_addresses, qr_lines
+from websim.robot_server import SimServer
 from websim.sites import Site, dashboard_url, public_host, url_name
 from websim.submissions import SubmitLimits
 
@@ -124,6 +124,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --class: a new name enrols on its first connection, which "
                              "is handed that robot's token (its page keeps it); nobody else "
                              "can take the name afterwards")
+    parser.add_argument("--arena", action="store_true",
+                        help="with --class: every student's robot in the one --world, where "
+                             "they see each other (LiDAR) and collide; a robot the world "
+                             "file places (its robots: list) starts there, the others at the "
+                             "nearest free place to its start; see docs/arena.md")
+    parser.add_argument("--student-spawn", type=int, default=0, metavar="N",
+                        help="with --arena: a student may spawn up to N robots of their own "
+                             "into the arena (simulation_interfaces' SpawnEntity, turtlesim's "
+                             "/spawn) and delete them (default 0: only the instructor spawns)")
     parser.add_argument("--open-drive", action="store_true",
                         help="with --class: any connection may drive and reset any robot "
                              "(default: only with the robot's token or the instructor's; "
@@ -501,8 +510,8 @@ def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
     if site.classroom is not None:
         localhost_only_discovery(os.environ)
     if site.robot is not None and isinstance(site.front, SimServer):
-        runtime = RosRuntime(site.robot, site.front.bridge, loop,
-                             site.front.host.schedule.writers, site.ros_parameters,
+        runtime = RosRuntime(site.robot, site.front.bridge, loop, site.front.driver.writers,
+                             site.ros_parameters,
                              simulation=site.simulation)
     elif site.classroom is not None:
         hosts = site.class_hosts()
@@ -511,7 +520,7 @@ def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
             raise RuntimeError(f"--ros: robot names must also be ROS namespaces (a letter or _ "
                                f"first, no -): {', '.join(unnamable[:5])}")
         runtime = ClassRosRuntime([(name, host.robot) for name, host in hosts], loop,
-                                  site.classroom.schedule)
+                                  site.classroom.driver)
     else:
         raise RuntimeError("--ros: this site has neither a robot nor a class")
     runtime.start()

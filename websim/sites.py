@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import io
 import json
 import os
@@ -34,20 +35,22 @@ from classroom.state import (
     class_identity,
     default_state_path,
 )
+from heartbeat.driver import TickDriver
+from heartbeat.schedule import Schedule
 from physics import ConfigError, LidarParams, RobotParams
 from ros_nodes.recording import SINGLE_ROBOT_NAME, Recorder
 from ros_nodes.robot_description import robot_json
 from ros_nodes.robot_host import TOKEN_SERVICE, RobotHost
 from ros_nodes.robot_interface import ROBOTS_PREFIX
-from ros_nodes.robot_server import SimServer
 from ros_nodes.simulation_services import SimulationServices, add_simulation_services
-from ros_nodes.simulator_control import OneRobotWorld
+from ros_nodes.simulator_control import OneRobotWorld, SharedWorld
 from ros_nodes.virtual_robot_core import VirtualRobot
+from ros_nodes.world_host import WorldHost
 from rosbridge.core.clock import Clock
 from rosbridge.core.limits import ClientLimits, LatchedBytes, OriginPolicy
 from rosbridge.transport.front import WebSocketFront
-from rosbridge.transport.schedule import Schedule
 from websim.lan import lan_addresses
+from websim.robot_server import SimServer
 
 REPLAY_SERVICE = "/websim/replay"
 """A replay's player controls (``websim.replay.ReplayHost.control``), named to its page in
@@ -82,6 +85,8 @@ class Site:
         admin_token: the instructor's token (a class's: given, or kept in its state file);
             empty: the caller's.
         replay: a replay's player (``websim.replay.ReplayHost``), else None.
+        arena: a class whose robots share one world (``--arena``): the dashboard also
+            draws it as one map.
     """
 
     front: WebSocketFront
@@ -98,6 +103,7 @@ class Site:
     ros_parameters: dict[str, Any] = field(default_factory=dict)
     admin_token: str = ""
     replay: Any = None
+    arena: bool = False
 
     def close(self) -> None:
         """Close the recordings, save a class's state and release its file (at shutdown)."""
@@ -107,13 +113,20 @@ class Site:
             self.classroom.save()
             self.classroom.state.close()
 
-    def schedule(self) -> Schedule:
-        """The tick schedule the robots follow (a class's, or the single robot's host's)."""
+    def schedule(self) -> TickDriver | Schedule:
+        """What ticks the robots: a class's or a robot's tick driver, or a replay's schedule.
+
+        Its ``gates``, ``pacers`` and ``tick_listeners`` apply to every tick.
+        """
         if self.classroom is not None:
-            return self.classroom.schedule
+            return self.classroom.driver
+        if isinstance(self.front, SimServer):
+            return self.front.driver
         destination = self.front.route("/")
         assert not isinstance(destination, str)
-        return destination[0].schedule
+        pace = destination[0].pace
+        assert isinstance(pace, Schedule)
+        return pace
 
     def class_hosts(self) -> list[tuple[str, RobotHost]]:
         """The robots of a class, by name (none for a single robot)."""
@@ -168,6 +181,8 @@ class Site:
                 single: dict[str, object] = {
                     "about": "this server's robot, filled by websim serve: the bridge of the "
                              "server that served the page", "ws": url, "adminWs": url}
+                if self.robot is not None:  # its name in its world: its /world_robots marker
+                    single["entity"] = self.robot.sim.name
                 if self.replay is not None:  # the page is a player: no driving
                     single["replay"] = {"name": REPLAY_SERVICE, "type": REPLAY_SERVICE_TYPE}
                 return json.dumps(single)
@@ -179,8 +194,10 @@ class Site:
                                             "root", "workers": None})
             url = f"ws://{url_name(hostname)}:{self.ws_port}/"
             return json.dumps({"about": "the instructor's view of this class, filled by "
-                                        "websim serve; robotsPath: where its robots' pages are",
-                               "ws": url, "adminWs": url, "robotsPath": ROBOTS_PREFIX})
+                                        "websim serve; robotsPath: where its robots' pages are; "
+                                        "arena: whether they share one world",
+                               "ws": url, "adminWs": url, "robotsPath": ROBOTS_PREFIX,
+                               "arena": self.arena})
         if name == "robot.json":
             host = dict(self.class_hosts()).get(robot)
             if host is None:
@@ -189,7 +206,7 @@ class Site:
         url = f"ws://{url_name(hostname)}:{self.ws_port}{ROBOTS_PREFIX}{robot}"
         config: dict[str, object] = {"about": f"robot {robot} of this class, filled by websim "
                                               "serve", "ws": url, "adminWs": url,
-                                     "robot": robot}
+                                     "robot": robot, "entity": robot}
         if self.classroom is not None and self.classroom.open_class:
             # the service that hands a newly enrolled robot's token to its first connection
             config["robotToken"] = {"name": TOKEN_SERVICE, "type": "websim/srv/RobotToken"}
@@ -215,7 +232,7 @@ def single_robot(robot: VirtualRobot, token: str, limits: ClientLimits,
     """
     server = SimServer(robot, token, limits=limits, origins=origins)
     simulation = add_simulation_services(server.bridge, OneRobotWorld(
-        server.host, SINGLE_ROBOT_NAME)) if simulation_services else None
+        server.world, robot.sim.name, server.driver)) if simulation_services else None
     site = Site(server, robot=robot, ws_port=ws_port, recorder=recorder,
                 headline=f"world '{robot.sim.world.name}', {robot.sim.mode} mode",
                 simulation=simulation)
@@ -271,7 +288,10 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
                               max_robots=args.max_robots, idle_pause_s=args.idle_pause,
                               lazy=args.worker, clock=clock, state=state,
                               latched=LatchedBytes.for_server(limits),
-                              recorder=recorder, on_robot=simulated,
+                              recorder=recorder,
+                              on_robot=functools.partial(
+                                  simulated, getattr(args, "arena", False),
+                                  getattr(args, "student_spawn", 0)),
                               enrolment_hours=getattr(args, "enrolment_hours",
                                                       DEFAULT_ENROLMENT_HOURS))
     except BaseException:
@@ -282,13 +302,15 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
                             open_drive=open_drive),
                 ws_port=args.public_ws_port or args.ws_port, classroom=classroom,
                 new_robot_json=robot_json(*new_robot_params), recorder=recorder,
-                admin_token=token)
+                admin_token=token, arena=getattr(args, "arena", False))
     names = list(classroom.students)
     notes = [note for note, wanted in (("new names enrol (open class)", args.open_class),
                                        ("a worker: a robot is made when first routed here",
                                         args.worker)) if wanted]
     if open_drive:
         notes.append("anyone may drive any robot (--open-drive)")
+    if getattr(args, "arena", False):
+        notes.append("every robot in the one world (--arena)")
     first, last = (names[0], names[-1]) if names else ("none yet", "none yet")
     site.banner.append(f"class:     {len(names)} robots ({first} ... {last}), each at "
                        f"{ROBOTS_PREFIX}NAME/ on both ports" + "".join(f"; {n}" for n in notes))
@@ -309,12 +331,17 @@ def classroom_site(args: argparse.Namespace, make_robot: Callable[[Student], Vir
     return site
 
 
-def simulated(name: str, host: RobotHost) -> None:
-    """A class robot's world of its own, with the simulation services over it.
+def simulated(arena: bool, spawn_quota: int, classroom: Classroom, name: str,
+              host: RobotHost, world: WorldHost) -> None:
+    """A class robot's simulation services, over its world.
 
-    ``simulation_interfaces`` and turtlesim's names (``ros_nodes.simulation_services``).
+    ``simulation_interfaces`` and turtlesim's names (``ros_nodes.simulation_services``): over
+    the robot's world of its own, or over the arena every robot shares (``--arena``), where
+    the class spawns and deletes robots and a student may spawn ``spawn_quota`` of them.
     """
-    add_simulation_services(host.bridge, OneRobotWorld(host, name))
+    control = SharedWorld(world, name, classroom.driver, classroom, spawn_quota) if arena \
+        else OneRobotWorld(world, name, classroom.driver)
+    add_simulation_services(host.bridge, control)
 
 
 def state_lines(state: ClassState, classroom: Classroom, token_kept: bool,

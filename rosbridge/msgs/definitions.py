@@ -212,26 +212,38 @@ def default(type_name: str) -> dict[str, Any]:
     return _message(type_name, {}, type_name, 0)
 
 
+@functools.cache
+def _layout(type_name: str) -> tuple[tuple[tuple[str, Any], ...], frozenset[str]]:
+    """A type's fields (name, (kind, detail)) and their names, made once per type."""
+    definition = tuple((name, kind) for name, kind in _fielddefs()[type_name][1]
+                       if name != EMPTY_PLACEHOLDER)
+    return definition, frozenset(name for name, _ in definition)
+
+
 def _message(type_name: str, msg: Any, where: str, depth: int) -> dict[str, Any]:
-    prefix = "" if where == type_name else f"{where}: "
     if depth > MAX_DEPTH:
         raise MessageError(f"{where}: nested too deeply")
-    if not isinstance(msg, Mapping):
+    if type(msg) is not dict and not isinstance(msg, Mapping):
+        prefix = "" if where == type_name else f"{where}: "
         raise MessageError(f"{prefix}expected an object ({type_name}), got "
                            f"{type(msg).__name__}")
-    definition = [(name, kind) for name, kind in _fielddefs()[type_name][1]
-                  if name != EMPTY_PLACEHOLDER]
-    names = {name for name, _ in definition}
+    definition, names = _layout(type_name)
     msg = from_ros1(type_name, msg)
-    for key in msg:
-        if key not in names:
-            raise MessageError(f"{prefix}{type_name} has no field '{str(key)[:60]}' "
-                               f"(fields: {', '.join(name for name, _ in definition)})")
+    if not names.issuperset(msg):
+        prefix = "" if where == type_name else f"{where}: "
+        key = next(key for key in msg if key not in names)
+        raise MessageError(f"{prefix}{type_name} has no field '{str(key)[:60]}' "
+                           f"(fields: {', '.join(name for name, _ in definition)})")
     out: dict[str, Any] = {}
+    top = where == type_name
     for name, (kind, detail) in definition:
-        path = name if where == type_name else f"{where}.{name}"
         if name in msg:
-            out[name] = _value(kind, detail, msg[name], path, depth)
+            value = msg[name]
+            if kind == Nodetype.BASE and type(value) is float and detail[0] == "float64":
+                out[name] = value  # the common case, as check_value would return it
+            else:
+                out[name] = _value(kind, detail, value, name if top else f"{where}.{name}",
+                                   depth)
         else:
             out[name] = _default(kind, detail, depth)
     return out

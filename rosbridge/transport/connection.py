@@ -2,8 +2,8 @@
 
 The core is pull-style: what a call into a hub queues, the call returns as a ``Flush`` (who
 must be written, the clients closing a loop first), and the I/O layer writes it through the
-``Writers`` of its event loop (``Schedule.writers``): a connection after each of its frames,
-a robot's host after its tick, the schedule for what came in between (``sweep``).
+``Writers`` of its event loop (its ``Pace``'s ``writers``): a connection after each of its
+frames, whoever runs a tick after it, the pace for what came in between (``sweep``).
 """
 
 from __future__ import annotations
@@ -28,9 +28,8 @@ from rosbridge.core.limits import (
 )
 from rosbridge.core.outbox import Frame, Outbox
 from rosbridge.core.session import Flush, Session
-from rosbridge.transport.schedule import Schedule
 from rosbridge.transport.wire import WireFrames
-from rosbridge.transport.writers import Writers
+from rosbridge.transport.writers import Pace, Writers
 
 log = logging.getLogger("websim.server")
 
@@ -48,7 +47,7 @@ PROGRESS_BYTES = 4096
 few bytes through now and then (zero-window probes)."""
 
 LARGE_FRAME_BYTES = 64 << 10
-"""Frames this large wait for room before the next tick (``Schedule.room``)."""
+"""Frames this large wait for room before the next tick (``Pace.room``)."""
 
 HANDLING_S_PER_BYTE = 10e-9
 """A generous estimate of what handling an accepted frame costs: 10 ms per MiB (parsing,
@@ -88,8 +87,9 @@ class BridgeConnection:
     Args:
         hub: what its frames go to: the bridge of the robot it talks to (or the instructor's
             view of a class).
-        schedule: the tick schedule large frames make room in; its ``writers`` write what
-            the hub returns (the connection registers there, by its outbox).
+        pace: what paces its messages: large frames make room before its next tick; its
+            ``writers`` write what the hub returns (the connection registers there, by its
+            outbox, in the pace's group: above real time that pace waits for it).
         connection: its WebSocket.
         peer: its address, for logs.
         is_admin: whether it presented the admin token.
@@ -103,12 +103,12 @@ class BridgeConnection:
             address; None: no such budget (the instructor's root view).
     """
 
-    def __init__(self, hub: Hub, schedule: Schedule, connection: ServerConnection, peer: str,
+    def __init__(self, hub: Hub, pace: Pace, connection: ServerConnection, peer: str,
                  is_admin: bool, limits: ClientLimits, wire: WireFrames | None = None,
                  clock: Clock = WALL_CLOCK, address: AddressBudget | None = None,
                  robot: RobotBudget | None = None) -> None:
-        self._schedule = schedule
-        self._writers: Writers = schedule.writers
+        self._pace = pace
+        self._writers: Writers = pace.writers
         self._bridge = hub
         self._connection = connection
         self._peer = peer
@@ -138,7 +138,7 @@ class BridgeConnection:
         if raw_socket is not None:
             raw_socket.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
         outbox = self.session.outbox
-        self._writers.add(outbox, self._flush)
+        self._writers.add(outbox, self._flush, self._pace)
         self._bridge.connect(self.session)
         log.info("client %s connected%s", self._peer,
                  " (admin)" if self.session.is_admin else "")
@@ -172,7 +172,7 @@ class BridgeConnection:
                 if wait_s > 0:  # its budget is spent: its frames wait, its socket backs up
                     await asyncio.sleep(wait_s)
                 if len(frame) >= LARGE_FRAME_BYTES:  # handled between ticks, not across one
-                    await self._schedule.room(len(frame) * HANDLING_S_PER_BYTE)
+                    await self._pace.room(len(frame) * HANDLING_S_PER_BYTE)
                 started = time.perf_counter()
                 self._writers.write(self._bridge.handle(self.session, frame))
                 handling_s = time.perf_counter() - started

@@ -24,7 +24,8 @@ import hmac
 import http
 import json
 import logging
-from typing import Any, Protocol
+from dataclasses import dataclass
+from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from websockets.asyncio.server import Server, ServerConnection, serve
@@ -47,8 +48,8 @@ from rosbridge.transport.connection import (
     Hub,
 )
 from rosbridge.transport.log_limits import LogThrottle
-from rosbridge.transport.schedule import Schedule
 from rosbridge.transport.wire import WireFrames
+from rosbridge.transport.writers import Pace
 
 log = logging.getLogger("websim.server")
 
@@ -61,16 +62,18 @@ whose handling budget is spent holds at most this many frames of server memory).
 
 
 
-class Destination(Protocol):
-    """Where a WebSocket path leads: a bridge and the tick schedule it follows (a robot's host)."""
+@dataclass(frozen=True)
+class Destination:
+    """Where a WebSocket path leads (a robot, in websim).
 
-    @property
-    def bridge(self) -> Bridge:
-        """The bridge the connection's frames go to."""
+    Attributes:
+        bridge: the bridge the connection's frames go to.
+        pace: what paces the messages there (``writers.Pace``): its connections are written
+            through it and, above real time, waited for by it.
+    """
 
-    @property
-    def schedule(self) -> Schedule:
-        """The tick schedule large frames make room in."""
+    bridge: Bridge
+    pace: Pace
 
 
 class WebSocketFront(abc.ABC):
@@ -113,11 +116,11 @@ class WebSocketFront(abc.ABC):
             (host, name), name None for a server's single robot; or the reason to refuse.
         """
 
-    def root_view(self, path: str, token: str | None) -> tuple[Hub, Schedule] | None:
+    def root_view(self, path: str, token: str | None) -> tuple[Hub, Pace] | None:
         """Another hub than a bridge for this path and token (an instructor's view), or None.
 
         Returns:
-            (hub, the schedule its large frames make room in), or None.
+            (hub, the pace its messages follow), or None.
         """
         return None
 
@@ -260,8 +263,8 @@ class WebSocketFront(abc.ABC):
         view = self.root_view(target.path, token)
         if view is not None:
             log.info("instructor %s connected to the class's root view", peer)
-            hub, schedule = view
-            await BridgeConnection(hub, schedule, connection, peer, True,
+            hub, pace = view
+            await BridgeConnection(hub, pace, connection, peer, True,
                                    self.root_limits(), self.wire, self.clock).run()
             return
         routed = self.route(target.path)
@@ -275,7 +278,7 @@ class WebSocketFront(abc.ABC):
         budget = self.addresses.opened(address, name)
         robot_budget = self.robot_budgets.opened(name or "")
         try:
-            client = BridgeConnection(host.bridge, host.schedule, connection, peer, is_admin,
+            client = BridgeConnection(host.bridge, host.pace, connection, peer, is_admin,
                                       self.limits, self.wire, self.clock, budget, robot_budget)
             client.session.may_drive = self.may_drive(name, is_admin)
             client.session.instructor = self.is_admin_token(token)

@@ -6,9 +6,11 @@ connection's outbox) and has it write what waits there: at once for the clients 
 loop, after the current callback for the others (so that everything one callback queued for
 a client goes out in one write).
 
-Above real time the schedule waits, before each tick, for the clients that have not yet taken
-what they were written (``waiting``, ``progress``), so a faster run drops nothing; a client
-it gave up on (``release``) is not waited for again until it has caught up.
+Whoever paces the messages above real time waits, before each tick, for the clients that have
+not yet taken what they were written (``waiting``, ``progress``), so a faster run drops
+nothing; a client it gave up on (``release``) is not waited for again until it has caught up.
+Each connection belongs to one ``Pace`` (what its path leads to says which: a robot's, in
+websim), and a pace waits only for its own connections.
 """
 
 from __future__ import annotations
@@ -16,9 +18,25 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import Callable
+from typing import Protocol
 
 from rosbridge.core.outbox import Outbox
 from rosbridge.core.session import Flush
+
+
+class Pace(Protocol):
+    """What paces a connection's messages: where its flushes are written, room for big work.
+
+    The application's (websim: a robot's tick driver). This library knows no tick: a pace
+    is whatever decides when the next burst of messages comes.
+    """
+
+    @property
+    def writers(self) -> Writers:
+        """The connections of the event loop, where flushes are written."""
+
+    async def room(self, cost_s: float) -> None:
+        """Wait until ``cost_s`` of work can run before the next burst of messages."""
 
 
 class Writers:
@@ -26,6 +44,8 @@ class Writers:
 
     def __init__(self) -> None:
         self._writers: dict[Outbox, Callable[[], None]] = {}
+        self._groups: dict[Outbox, object] = {}
+        self._members: dict[object, dict[Outbox, None]] = {}
         self._later: dict[Outbox, None] = {}
         self._scheduled = False
         self._released: set[Outbox] = set()
@@ -34,13 +54,25 @@ class Writers:
     def __len__(self) -> int:
         return len(self._writers)
 
-    def add(self, outbox: Outbox, write: Callable[[], None]) -> None:
-        """Have ``write`` called whenever frames in ``outbox`` are to be written."""
+    def add(self, outbox: Outbox, write: Callable[[], None], group: object = None) -> None:
+        """Have ``write`` called whenever frames in ``outbox`` are to be written.
+
+        ``group``: whose pace waits for it (``waiting``); None: nobody's.
+        """
         self._writers[outbox] = write
+        self._groups[outbox] = group
+        if group is not None:
+            self._members.setdefault(group, {})[outbox] = None
 
     def remove(self, outbox: Outbox) -> None:
         """Forget ``outbox``'s writer (its connection is gone)."""
         self._writers.pop(outbox, None)
+        group = self._groups.pop(outbox, None)
+        members = self._members.get(group)
+        if members is not None:
+            members.pop(outbox, None)
+            if not members:
+                del self._members[group]
         self._later.pop(outbox, None)
         self._released.discard(outbox)
         self._progress.set()  # a client gone is waited for no more
@@ -84,15 +116,15 @@ class Writers:
                 write()
         self._progress.set()
 
-    def waiting(self) -> list[Outbox]:
-        """The clients whose frames their sockets have not all taken, but the released.
+    def waiting(self, group: object) -> list[Outbox]:
+        """The clients of ``group`` whose sockets have not taken all their frames, but released.
 
         A client has caught up when nothing waits in its outbox and it is not ``behind`` (its
         connection's writer is not sending a backlog); a released client that has caught up
         is waited for again from then on.
         """
         waiting = []
-        for outbox in self._writers:
+        for outbox in self._members.get(group, ()):
             if outbox.behind or outbox.queued_bytes > 0:
                 if outbox not in self._released:
                     waiting.append(outbox)

@@ -4,7 +4,8 @@ import { test } from 'node:test';
 
 import {
   applyMarkerArray, composePose, markerBounds, MARKER, parameterValue, poseFromOdometry,
-  scanPoints, stampSeconds, transformFromTf, twist, valueOfParameter, yawFromQuaternion,
+  robotsFromMarkers, scanPoints, stampSeconds, transformFromTf, twist, valueOfParameter,
+  yawFromQuaternion,
 } from '../../web-interface/js/ros-msgs.js';
 import { robot } from './robot.mjs';
 
@@ -157,4 +158,23 @@ test('ParameterValue both ways, by robot.json\'s type codes', () => {
   assert.throws(() => parameterValue(types, types.DOUBLE, null), TypeError);
   assert.throws(() => parameterValue(types, types.INTEGER, 1.5), TypeError);
   assert.throws(() => parameterValue(types, types.NOT_SET, 1), TypeError);
+});
+
+test('the world\'s other robots from /world_robots, the page\'s own left out', () => {
+  const cylinder = (text, x, y, yaw, diameter) => ({
+    ns: 'world_robots', id: 0, type: MARKER.CYLINDER, action: MARKER.ADD, text,
+    pose: { position: { x, y, z: 0.06 }, orientation: yawQuaternion(yaw) },
+    scale: { x: diameter, y: diameter, z: 0.12 },
+  });
+  const msg = { markers: [cylinder('alice', 1, 2, 0.5, 0.22), cylinder('bob', -1, 0, -2, 0.3),
+    cylinder('lost', null, 0, 0, 0.22)] };
+  const others = robotsFromMarkers(msg, 'bob');
+  assert.equal(others.length, 1); // bob is this page's robot; lost's pose is not finite
+  assert.equal(others[0].name, 'alice');
+  close(others[0].x, 1);
+  close(others[0].y, 2);
+  close(others[0].yaw, 0.5);
+  close(others[0].radius, 0.11);
+  assert.equal(robotsFromMarkers(msg).length, 2); // no name of its own: every robot
+  assert.deepEqual(robotsFromMarkers(undefined), []);
 });

@@ -101,6 +101,7 @@ async function main() {
     resetNotice: $('#reset-notice'),
   }, robot);
   const state = createState();
+  state.entity = config.entity ?? null; // this robot's name in its world: not drawn twice
   subscribeRobot(connection, state, robot);
   const view = createView(state, robot);
   const teleop = new Teleop(connection, state, robot);

@@ -25,6 +25,7 @@ import {
 } from './class-commands.js';
 import { classSummary, isHeld, onStatus, onStatusError } from './class-state.js';
 import { ClassGrid } from './class-grid.js';
+import { ArenaMap } from './class-arena.js';
 import { Confirmation } from './confirm.js';
 
 /** The class's robot list is asked for again this often (ms): an open class enrols students. */
@@ -216,6 +217,7 @@ async function main() {
   };
 
   // The robots: listed by each root when it opens, and again now and then.
+  let arena = null; // the arena's map (class-arena.js), once a robot of it is known
   const noRobots = roots.list.length === 1 ? 'The class has no robots yet.'
     : 'No worker hosts a robot yet: a worker makes a robot when its student first connects.';
   const loadRobots = async (root) => {
@@ -223,6 +225,10 @@ async function main() {
       const added = feed.addRobots(roots.claim(root, await root.commands.robots()),
         root.connection);
       grid.add(added.map(stateOf));
+      if (config.arena && !arena && added.length) { // one world: one map of it, too
+        arena = new ArenaMap($('#arena canvas'), root.connection, robot, added[0]);
+        $('#arena').hidden = false;
+      }
       if (added.length) pollers.get(root).pollNow(); // their first status now, not in a period
       root.listed = true;
       root.message = null;
@@ -289,7 +295,7 @@ async function main() {
     });
   }
 
-  runFrameLoop((now) => grid.update(now), (now) => {
+  runFrameLoop((now) => grid.update(now), () => arena?.draw(), (now) => {
     const summary = classSummary(feed.states.values(), now);
     const text = `${summary.robots} robots · ${summary.driving} driving · ${summary.held} paused`;
     const element = $('#class-summary');

@@ -138,24 +138,33 @@ export class RobotThumb {
   }
 
   _drawRobot(pose) {
-    const { ctx } = this;
     const [cx, cy] = this.worldToScreen(pose.x, pose.y);
-    const r = Math.max(this.radiusM * this.camera.scale, MIN_ROBOT_PX);
-    ctx.beginPath();
-    ctx.arc(cx, cy, r, 0, 2 * Math.PI);
-    ctx.fillStyle = COLORS.robotFill;
-    ctx.fill();
-    ctx.lineWidth = OUTLINE_PX;
-    ctx.strokeStyle = COLORS.robot;
-    ctx.stroke();
-    ctx.beginPath(); // heading: centre to the front, longer than the body on tiny scales
-    ctx.moveTo(cx, cy);
-    const reach = Math.max(r, 2 * MIN_ROBOT_PX);
-    ctx.lineTo(cx + reach * Math.cos(pose.theta), cy - reach * Math.sin(pose.theta)); // y flips
-    ctx.lineWidth = HEADING_PX;
-    ctx.lineCap = 'round';
-    ctx.strokeStyle = COLORS.heading;
-    ctx.stroke();
+    paintRobot(this.ctx, cx, cy, this.radiusM * this.camera.scale, pose.theta);
   }
+}
+
+/**
+ * A robot at CSS pixel (cx, cy): its footprint of `radiusPx` (never under MIN_ROBOT_PX) and a
+ * heading line from its centre to its front at `yaw` (rad, map frame), longer than the body
+ * on tiny scales. The thumbnails' and the arena map's (class-arena.js).
+ */
+export function paintRobot(ctx, cx, cy, radiusPx, yaw) {
+  const r = Math.max(radiusPx, MIN_ROBOT_PX);
+  ctx.beginPath();
+  ctx.arc(cx, cy, r, 0, 2 * Math.PI);
+  ctx.fillStyle = COLORS.robotFill;
+  ctx.fill();
+  ctx.lineWidth = OUTLINE_PX;
+  ctx.strokeStyle = COLORS.robot;
+  ctx.stroke();
+  ctx.beginPath();
+  ctx.moveTo(cx, cy);
+  const reach = Math.max(r, 2 * MIN_ROBOT_PX);
+  ctx.lineTo(cx + reach * Math.cos(yaw), cy - reach * Math.sin(yaw)); // y flips
+  ctx.lineWidth = HEADING_PX;
+  ctx.lineCap = 'round';
+  ctx.strokeStyle = COLORS.heading;
+  ctx.stroke();
+  return r;
 }
 

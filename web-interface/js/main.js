@@ -22,6 +22,7 @@ async function main() {
   const [config, robot] = await Promise.all([loadSiteConfig(), robotDescription()]);
   if (!robot) return;
   const state = createState();
+  state.entity = config.entity ?? null; // this robot's name in its world: not drawn twice
   // A class robot's token (the links file's #token=, or what an open class handed this page):
   // kept in localStorage, sent only to the page's own bridge, never shown.
   const token = takeRobotToken(window.location, window.history, window.localStorage);

@@ -5,7 +5,7 @@
 import { missingLibraries, nipplejs } from './vendor.js';
 import {
   clearTrail, noteLinkDown, noteLinkUp, onCommand, onGroundTruth, onOdometry, onScan, onTfStatic,
-  onWorld,
+  onWorld, onWorldRobots,
 } from './state.js';
 import { twistValues } from './ros-msgs.js';
 import { noteCommand, noteOwnCommand } from './drivers.js';
@@ -32,6 +32,9 @@ export function subscribeRobot(connection, state, robot) {
   on('scan', (m) => onScan(state, m, now()));
   on('tf_static', (m) => onTfStatic(state, m), { queueLength: 10 });
   on('world', (m) => onWorld(state, m));
+  if (robot.topics.world_robots) { // the world's other robots (an arena), at 10 Hz
+    on('world_robots', (m) => onWorldRobots(state, m, now()), { throttleMs: 100 });
+  }
   on('cmd_vel', (m) => {
     const { linear, angular } = twistValues(m); // any client's command: what the robot obeys
     onCommand(state, linear, angular);

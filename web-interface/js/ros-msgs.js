@@ -152,6 +152,24 @@ export function applyMarkerArray(markers, msg) {
   return markers;
 }
 
+/**
+ * The robots of a world (its /world_robots visualization_msgs/MarkerArray: a CYLINDER each,
+ * its text the robot's name) -> [{name, x, y, yaw (rad), radius (m)}] in the map frame, but
+ * the robot named `self` (the page's own) and any whose pose is not finite.
+ */
+export function robotsFromMarkers(msg, self = null) {
+  const robots = [];
+  for (const marker of msg?.markers ?? []) {
+    if (marker.type !== MARKER.CYLINDER || marker.action === MARKER.DELETE) continue;
+    const name = typeof marker.text === 'string' ? marker.text : '';
+    const position = marker.pose?.position;
+    if (name === self || !Number.isFinite(position?.x) || !Number.isFinite(position?.y)) continue;
+    const pose = markerPose(marker);
+    robots.push({ name, x: pose.x, y: pose.y, yaw: pose.yaw, radius: (marker.scale?.x || 0) / 2 });
+  }
+  return robots;
+}
+
 function markerPose(marker) {
   const position = marker.pose?.position ?? {};
   return { x: position.x || 0, y: position.y || 0, yaw: yawFromQuaternion(marker.pose?.orientation) };

@@ -4,7 +4,7 @@
 // bookkeeping (trail, plot history, message rates, which pose to show) is testable in Node.
 
 import {
-  applyMarkerArray, markerBounds, poseFromOdometry, scanPoints, transformFromTf,
+  applyMarkerArray, markerBounds, poseFromOdometry, robotsFromMarkers, scanPoints, transformFromTf,
 } from './ros-msgs.js';
 import { createDrivers } from './drivers.js';
 import { createLatency, noteOdometry } from './latency.js';
@@ -42,6 +42,9 @@ export function createState() {
     markers: new Map(), // the world's walls and discs (map frame), from /world
     worldBounds: null,
     worldVersion: 0, // bumped on every /world: view.js re-renders its wall layer
+    entity: null, // this robot's name in its world (config.json): not among the others
+    others: [], // the other robots of the world {name, x, y, yaw, radius} (map frame)
+    othersAtMs: -Infinity, // when /world_robots last came
     trail: { frame: null, points: [] }, // points {x, y, tMs, gap}; gap: no line to it
     command: { linear: 0, angular: 0 }, // the latest /cmd_vel (m/s, rad/s)
     drivers: createDrivers(), // whose /cmd_vel that is: this page's or another client's
@@ -182,6 +185,12 @@ export function onWorld(state, msg) {
   applyMarkerArray(state.markers, msg);
   state.worldBounds = markerBounds(state.markers);
   state.worldVersion += 1;
+}
+
+/** /world_robots: every robot of the world at a tick; the page keeps the others. */
+export function onWorldRobots(state, msg, nowMs) {
+  state.others = robotsFromMarkers(msg, state.entity);
+  state.othersAtMs = nowMs;
 }
 
 export function onCommand(state, linear, angular) {

@@ -21,6 +21,8 @@ export const COLORS = Object.freeze({
   scan: '#e11d48',
   robotFill: 'rgba(37, 99, 235, 0.16)',
   robot: '#2563eb',
+  otherFill: 'rgba(100, 116, 139, 0.22)',
+  other: '#64748b',
   heading: '#1e3a8a',
   wheel: '#334155',
   trail: '37, 99, 235',
@@ -32,6 +34,7 @@ export const COLORS = Object.freeze({
 const SCAN_DOT_PX = 3;
 const MIN_SCALE = 5; // px per m
 const MAX_SCALE = 3000;
+const OTHERS_STALE_MS = 1000; // /world_robots older than this: the others are not shown
 const DEFAULT_SPAN_M = 4; // what the view shows around the robot when there is no world
 const FIT_MARGIN = 0.04;
 const FIT_PAD_PX = 44; // room for the buttons above and the scale bar below a fitted world
@@ -121,6 +124,7 @@ export class View {
     if (frame !== 'odom') this._drawWalls(); // walls are in map: they need ground truth
     this._drawAxes();
     this._drawTrail(atMs);
+    if (frame === 'map') this._drawOthers(atMs); // the world's other robots are in map
     if (pose) {
       this._drawScan(poseAt(state, frame, state.scan?.stampS) ?? pose);
       this._drawRobot(pose);
@@ -312,6 +316,34 @@ export class View {
     ctx.closePath();
     ctx.fillStyle = COLORS.heading;
     ctx.fill();
+    ctx.restore();
+  }
+
+  /** The world's other robots (/world_robots): a disc, a heading line and the name each. */
+  _drawOthers(atMs) {
+    const { ctx, state } = this;
+    if (!state.others.length || atMs - state.othersAtMs > OTHERS_STALE_MS) return;
+    const scale = this.camera.scale;
+    ctx.save();
+    ctx.font = '11px system-ui, sans-serif';
+    ctx.textAlign = 'center';
+    ctx.lineWidth = 2;
+    for (const other of state.others) {
+      const [cx, cy] = this.worldToScreen(other.x, other.y);
+      const r = Math.max(other.radius * scale, 3);
+      ctx.beginPath();
+      ctx.arc(cx, cy, r, 0, 2 * Math.PI);
+      ctx.fillStyle = COLORS.otherFill;
+      ctx.fill();
+      ctx.strokeStyle = COLORS.other;
+      ctx.stroke();
+      ctx.beginPath(); // heading: canvas y points down, so the yaw turns the other way
+      ctx.moveTo(cx, cy);
+      ctx.lineTo(cx + r * Math.cos(other.yaw), cy - r * Math.sin(other.yaw));
+      ctx.stroke();
+      ctx.fillStyle = COLORS.text;
+      ctx.fillText(other.name, cx, cy - r - 4);
+    }
     ctx.restore();
   }
 

@@ -1,22 +1,24 @@
-"""The tick schedule of one event loop: deadlines without drift, room for large work, a pace.
+"""One pace of ticks: deadlines without drift, room for large work, waits for its own clients.
 
-It also holds the loop's ``Writers``: the connections register there, and whoever runs a
-tick writes what it returns through them.
+A ``Schedule`` calls its tick every ``period_s / speed`` of wall time. At up to real time a
+tick is due at its deadline and waits for nobody: a tick that starts late is late (a robot
+sheds its /scan first) and a slow client gets the newest of each topic. Above real time
+(``speed`` over 1, or ``SPEED_MAX``), ``period_s / speed`` is a pace not to exceed, not a
+deadline: before each tick the clients read and write, and the schedule waits until each of
+ITS clients (the connections that registered in its group of the loop's ``Writers``: a
+robot's, never a classmate's) has taken the frames it was written, so a faster run drops
+nothing and no tick is ever late (nothing is shed); a client that cannot keep the pace slows
+its own robot's run, never loses its messages and never holds another robot. A client that
+has not taken its frames within ``CLIENT_WAIT_S`` is released: the ticks go on without
+waiting for it (it gets the newest of each topic, as a slow client does at real time) until
+it has caught up, and the connection's stall watchdog closes it if its socket keeps taking
+nothing. Whatever else must keep up with the ticks (a recording's writer) is waited for the
+same way (``pacers``). A ``gate`` holds the next tick for as long as it says, whatever the
+speed (a graded run in lock step with its controller: ``websim.grade_server``); the time it
+held is not counted late.
 
-Its clock sets the pace. On wall time (``WallClock``), and on a ``SimClock`` at up to real
-time, a tick is due every ``period_s / speed`` of wall time and waits for nobody: a tick that
-starts late is late (a robot sheds its /scan first) and a slow client gets the newest of each
-topic. Above real time (a ``SimClock`` at a speed over 1, or ``max``), ``period_s / speed`` is
-a pace not to exceed, not a deadline: before each tick the clients read and write, and the
-schedule waits until every client has taken the frames it was written, so a faster run drops
-nothing and no tick is ever late (nothing is shed); a host or a client that cannot keep the
-pace slows the run, never loses its messages. A client that has not taken its frames within
-``CLIENT_WAIT_S`` is released: the ticks go on without waiting for it (it gets the newest of
-each topic, as a slow client does at real time) until it has caught up, and the connection's
-stall watchdog closes it if its socket keeps taking nothing. Whatever else must keep up
-with the ticks (a recording's writer) is waited for the same way (``pacers``). A ``gate`` holds
-the next tick for as long as it says, whatever the speed (a graded run in lock step with its
-controller: ``websim.grade_server``); the time it held is not counted late.
+The schedule is a ``rosbridge.transport.writers.Pace``: the connections of its robots make
+room in it for their large frames and are written through its ``writers``.
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ import asyncio
 import logging
 from collections.abc import Awaitable, Callable
 
-from rosbridge.core.clock import WALL_CLOCK, Clock, SimClock
+from ros_nodes.sim_clock import SPEED_MAX
+from rosbridge.core.clock import WALL_CLOCK, Clock
 from rosbridge.transport.writers import Writers
 
 log = logging.getLogger("websim.robot")
@@ -53,60 +56,58 @@ client that stopped reading, not a slow one."""
 CLIENT_POLL_S = 0.01
 """While waiting for clients, how often the schedule looks again besides when told (s)."""
 
+Gate = Callable[[], Awaitable[None]]
+"""Holds the next tick as long as it must (and bounds its own wait)."""
+
 
 class Schedule:
-    """The tick schedule of one event loop, shared by every robot on it.
+    """One pace of ticks on an event loop.
 
     Deadlines advance by exactly one period on the clock's monotonic time (no drift); a loop
     that falls ``RESYNC_AFTER_S`` behind restarts its schedule instead of replaying the ticks.
     Before each tick, whatever waits for a connection is written (``Writers.sweep``: frames
-    queued between ticks by something other than a client's frame, a ROS graph's answer).
-    With a ``SimClock`` the schedule moves it one period per tick, before the tick runs, and
-    paces the ticks at its speed (the module's docstring).
+    queued between ticks by something other than a client's frame, a ROS graph's answers).
 
     Args:
         period_s: tick period (s of sim time; of wall time at real time).
-        clock: what the deadlines are read on (its ``monotonic_s``; default: wall time);
-            a ``SimClock`` is also ticked and sets the speed.
+        clock: what the deadlines are read on (its ``monotonic_s``; default: wall time).
+        speed: times real time the ticks run (1: real time; ``SPEED_MAX``: back to back).
+        writers: the event loop's connections (default: a set of its own), where flushes are
+            written; it waits for those of its own group (itself).
+        gates: awaited in turn before every tick, at any speed (default: its own list).
+        pacers: above real time, waited for as clients are: each says whether it has taken
+            what the ticks gave it (a recording's writer); one that has not within
+            ``CLIENT_WAIT_S`` is not waited for at that tick (default: its own list).
+        tick_listeners: called after every tick (default: its own list).
 
     Attributes:
-        speed: times real time the ticks run (1 on wall time; ``SPEED_MAX``: back to back).
+        speed: times real time the ticks run.
         ahead: whether that is above real time (the ticks wait for the clients, never shed).
         wall_period_s: wall time per tick at that speed (0 at ``max``).
         started_s: when the schedule started (the clock's monotonic s), None before.
+        ticks: ticks it has run.
         resyncs: times the schedule was restarted after falling far behind.
         clients_released: times a client was released (not waited for) above real time.
-        tick_listeners: called after every tick (a class's ``/clock`` on the ROS graph).
-        pacers: above real time, waited for as clients are: each says whether it has taken
-            what the ticks gave it (a recording's writer, ``ros_nodes.recording``); one that
-            has not within ``CLIENT_WAIT_S`` is not waited for at that tick.
-        gates: awaited in turn before every tick, at any speed: each holds the tick as long
-            as it must and bounds its own wait (the schedule waits for nothing else so
-            long); the time they held moves the deadlines on.
-        writers: the connections of the loop, where flushes are written.
-
-    Raises:
-        ValueError: a ``SimClock`` of another period.
     """
 
-    def __init__(self, period_s: float, clock: Clock = WALL_CLOCK) -> None:
+    def __init__(self, period_s: float, clock: Clock = WALL_CLOCK, speed: float = 1.0,
+                 writers: Writers | None = None, gates: list[Gate] | None = None,
+                 pacers: list[Callable[[], bool]] | None = None,
+                 tick_listeners: list[Callable[[], None]] | None = None) -> None:
         self.period_s = period_s
         self.clock = clock
-        self._sim_clock = clock if isinstance(clock, SimClock) else None
-        if self._sim_clock is not None and self._sim_clock.period_s != period_s:
-            raise ValueError(f"a schedule of {period_s} s ticks cannot run a sim clock of "
-                             f"{self._sim_clock.period_s} s ticks")
-        self.speed = 1.0 if self._sim_clock is None else self._sim_clock.speed
-        self.ahead = self.speed > 1.0
-        self.wall_period_s = period_s / self.speed
-        self.writers = Writers()
+        self.speed = speed
+        self.ahead = speed > 1.0
+        self.wall_period_s = 0.0 if speed == SPEED_MAX else period_s / speed
+        self.writers = Writers() if writers is None else writers
+        self.gates: list[Gate] = [] if gates is None else gates
+        self.pacers: list[Callable[[], bool]] = [] if pacers is None else pacers
+        self.tick_listeners: list[Callable[[], None]] = \
+            [] if tick_listeners is None else tick_listeners
         self.started_s: float | None = None
+        self.ticks = 0
         self.resyncs = 0
         self.clients_released = 0
-        self.tick_listeners: list[Callable[[], None]] = []
-        self.pacers: list[Callable[[], bool]] = []
-        self.gates: list[Callable[[], Awaitable[None]]] = []
-        self._ticks = 0
         self._next_deadline_s: float | None = None
 
     async def run(self, tick: Callable[[float], None]) -> None:
@@ -135,11 +136,9 @@ class Schedule:
             elif now - deadline > RESYNC_AFTER_S:
                 log.warning("tick loop %.1f s behind; restarting its schedule", now - deadline)
                 self.resyncs += 1
-                self.started_s = now - self._ticks * self.wall_period_s
+                self.started_s = now - self.ticks * self.wall_period_s
                 deadline = now
-            self._ticks += 1
-            if self._sim_clock is not None:
-                self._sim_clock.tick()
+            self.ticks += 1
             self.writers.sweep()
             tick(0.0 if self.ahead else max(0.0, now - deadline))
             for listener in self.tick_listeners:
@@ -149,9 +148,12 @@ class Schedule:
                     log.exception("a tick listener failed")
 
     async def _wait_for_clients(self) -> None:
-        """Wait until every client and pacer has taken its frames; release slow clients."""
+        """Wait until each of its clients and every pacer has taken its frames.
+
+        A client that does not within ``CLIENT_WAIT_S`` is released.
+        """
         writers, clock = self.writers, self.clock
-        waiting = writers.waiting()
+        waiting = writers.waiting(self)
         if not waiting and self._paced():
             return
         started_s = clock.monotonic_s()
@@ -167,7 +169,7 @@ class Schedule:
                                 CLIENT_WAIT_S)
                 return
             await writers.progress(min(left_s, CLIENT_POLL_S))
-            waiting = writers.waiting()
+            waiting = writers.waiting(self)
 
     def _paced(self) -> bool:
         """Whether every pacer has taken what it was given."""
@@ -178,7 +180,7 @@ class Schedule:
         if self.started_s is None:
             return 0
         if self.ahead:
-            return self._ticks
+            return self.ticks
         return int((self.clock.monotonic_s() - self.started_s) / self.wall_period_s)
 
     async def room(self, cost_s: float) -> None:

@@ -1,0 +1,1 @@
+"""The simulator's heartbeat: the one tick driver of a server and the paces it keeps."""
