@@ -33,6 +33,7 @@ from deployment import (
 )
 
 from physics.params import PROJECT_DIR
+from websim.http_server import PAGE_ROUTES
 
 
 def test_nothing_is_tied_to_amd64() -> None:
@@ -124,7 +125,9 @@ def page_references() -> set[str]:
 
 
 def test_everything_the_pages_load_is_in_the_image() -> None:
-    routes = {"", "admin"}  # nginx locations, not files
+    # nginx locations, and websim's own page routes (class.html and submissions.html link
+    # each other as /class and /submissions: websim serve --class serves them), not files
+    routes = {"", "admin", *(route.lstrip("/") for route in PAGE_ROUTES)}
     sources = published_sources()
     missing = []
     loaded = sorted(page_references() - routes)
