@@ -10,8 +10,10 @@ drive another's robot; the instructor's root view sees every robot.
 from __future__ import annotations
 
 import csv
+import json
 import math
 import threading
+import urllib.request
 from collections.abc import Iterator
 from typing import Any
 
@@ -224,3 +226,24 @@ def test_the_arena_spawns_and_deletes_robots_within_each_callers_rights(
     finally:
         teacher.close()
         carol.close()
+
+
+def test_a_spawned_robot_is_no_student_in_the_instructors_submissions(
+        arena: tuple[ServerProcess, dict[str, str]]) -> None:
+    """The Code panel's overview lists the class's students, not the robots spawned into it."""
+    server, _ = arena
+    teacher = Student(server, "alice", ADMIN_TOKEN)
+    try:
+        spawned = teacher.call("/spawn_entity", SRV + "SpawnEntity",
+                               spawn_args("gina", 2.0, -1.0))
+        assert spawned["result"]["result"] == OK, spawned
+        request = urllib.request.Request(f"{server.http_url}/class/submissions.json",
+                                         headers={"Authorization": f"Bearer {ADMIN_TOKEN}"})
+        with urllib.request.urlopen(request, timeout=30) as response:
+            overview = json.load(response)
+        assert [student["name"] for student in overview["students"]] == \
+            ["alice", "bob", "carol"]
+        assert teacher.call("/delete_entity", SRV + "DeleteEntity",
+                            {"entity": "gina"})["result"]["result"] == OK
+    finally:
+        teacher.close()

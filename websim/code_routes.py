@@ -247,7 +247,9 @@ class CodeRoutes:
         assert self.classroom is not None and self.state is not None
         newest = self.state.newest_code()
         kept = self.state.submissions()
-        names = sorted(set(self.classroom.students) | set(newest) | set(kept))
+        # the class's students, not the robots spawned into an arena (unless one saved code)
+        roster = {name for name in self.classroom.students if not self.classroom.spawned(name)}
+        names = sorted(roster | set(newest) | set(kept))
         students = []
         for name in names:
             code = newest.get(name)
