@@ -147,8 +147,10 @@ class Session:
             encoded.
         may_drive: whether it may change the robot (``access.DriveRules``): a class robot's
             client with neither its token nor the instructor's may only watch.
-        instructor: whether its admin rights are the instructor's (the class's admin token),
-            not only a robot's own token's (its owner's): the dashboard counts them apart.
+        instructor: whether its admin rights are the instructor's (the server's admin token:
+            every bridge of the server), not only a robot's own token's (its owner's): the
+            dashboard counts them apart, and an arena's simulation services grant it every
+            robot (``ros_nodes.simulator_control``). Set by the transport.
 
     Attributes:
         advertised: topic -> {advertise id: type}; a topic stays advertised while any id does.
