@@ -31,7 +31,12 @@ from pathlib import Path
 from typing import Any
 
 from grading import Scenario, controller_environment, evaluate, load_suite
-from grading.recorded import bag_folder, trajectory_from_bag
+from grading.recorded import (
+    TRUTH_FILE,
+    IncompleteRecordError,
+    bag_folder,
+    trajectory_from_truth,
+)
 from grading.report_page import report_html
 from grading.scenario import resolve_scenario_path
 from grading.trajectory import Sample
@@ -242,11 +247,22 @@ def score_run(scenario: Scenario, out: Path, options: GradeOptions, *,
     run_end = json.loads(run_file.read_text())
     base["run"] = run_end
     try:
-        bag = bag_folder(out / RECORDING_DIR)
-        trajectory = trajectory_from_bag(bag, scenario, run_end["epoch_s"])
-    except (FileNotFoundError, OSError, ValueError) as error:
-        return {**base, **_zero(f"the recording cannot be read: {error}")}, []
-    base["recording"] = str(bag)
+        trajectory, notes = trajectory_from_truth(out / TRUTH_FILE, scenario)
+        _check_complete(trajectory, run_end, scenario)
+    except IncompleteRecordError as error:
+        return {**base, **_zero(f"invalid run: {error}"), "invalid": True}, []
+    try:
+        base["recording"] = str(bag_folder(out / RECORDING_DIR))
+    except FileNotFoundError as error:
+        base["recording"] = None
+        base["recording_note"] = str(error)
+    for health in notes.get("recording", []):
+        if health.get("messages_lost") or health.get("state") not in (None, "closed"):
+            base["recording_note"] = (
+                f"the recording is incomplete ({health.get('state')}"
+                f"{': ' + health['reason'] if health.get('reason') else ''}; "
+                f"{health.get('messages_lost', 0)} messages lost): the score is from the "
+                "simulation's own record, which is complete")
     result = evaluate(scenario, trajectory)
     graded = result.to_json()
     graded.pop("name", None)
@@ -260,6 +276,21 @@ def score_run(scenario: Scenario, out: Path, options: GradeOptions, *,
         why = run_end["reason"]
     return {**base, **graded, "score": 0.0, "passed": False, "reason": why,
             "score_if_completed": graded["score"]}, trajectory
+
+
+def _check_complete(trajectory: Sequence[Sample], run_end: dict[str, Any],
+                    scenario: Scenario) -> None:
+    """Raise unless the record reaches the run's end (its sim time, or the end point).
+
+    Raises:
+        IncompleteRecordError: the record stops short of the run's end.
+    """
+    if run_end["ended_by"] != "duration":
+        return
+    last_s = trajectory[-1].t_s
+    if last_s < min(run_end["sim_time_s"], scenario.duration_s) - 1e-6:
+        raise IncompleteRecordError(f"the record of the ground truth ends at t = {last_s:.2f} s, "
+                                    f"before the run's end at {run_end['sim_time_s']:.2f} s")
 
 
 def asdict_controller(result: Any) -> dict[str, Any]:

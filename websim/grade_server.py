@@ -44,6 +44,7 @@ from typing import Any
 
 from classroom.registry import strong_token
 from grading import Scenario, load_suite
+from grading.recorded import TRUTH_FILE, TruthLog
 from physics import TICK_PERIOD_S, ConfigError, Simulation
 from physics.params import NoiseParams
 from ros_nodes.recording import Recorder
@@ -78,6 +79,14 @@ does not answer each observation, so the run could not be repeated exactly."""
 
 RUN_FILE = "run.json"
 RECORDING_DIR = "recording"
+
+RECORDING_MAX_BYTES = 64 * 1024 * 1024
+"""A graded run's bag is closed (complete) at this size: what a client publishes into it is
+bounded per run (a 120 s run of the robot's own topics is a few MB); the score does not read
+it (``grading.recorded.TruthLog``)."""
+
+GRAPH_READ_ONLY = "a graded run's robot cannot be changed or reset (websim grade)"
+"""``--ros``: why the robot's parameters and ``/reset_simulation`` on the graph are refused."""
 
 
 @dataclass
@@ -303,9 +312,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     robot = VirtualRobot(simulation, clock)
     token = strong_token()
     serve_args = serve_command_arguments(args)
-    recorder = Recorder(args.out / RECORDING_DIR)
+    recorder = Recorder(args.out / RECORDING_DIR, max_bytes=RECORDING_MAX_BYTES)
     site = sites.single_robot(robot, token, grade_limits(args.mode), OriginPolicy.default(
         args.host, args.http_port, []), args.ws_port, recorder=recorder)
+    site.graph_read_only = GRAPH_READ_ONLY
     host = site.front.host  # type: ignore[attr-defined]
     host.bridge.services.add(RESET_SERVICE, "std_srvs/srv/Empty", _refuse_reset)
 
@@ -318,14 +328,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     lock_step = LockStep(scenario, robot, clock, subscribed, connected, mode=args.mode,
                          step_on=args.step_on, out=args.out,
                          startup_timeout_s=args.startup_timeout)
+    truth = TruthLog(simulation, lambda: lock_step.sim_time_s)
     schedule = site.schedule()
     schedule.gates.append(lock_step.gate)
     schedule.tick_listeners.append(lock_step.after_tick)
+    schedule.tick_listeners.append(truth.after_tick)
     try:
         return serve_command.run(serve_args, site, token)
     finally:
         if lock_step.finished is None:
             lock_step.write()
+        truth.write(args.out / TRUTH_FILE,
+                    recording=[recording.health() for recording in recorder.recordings])
 
 
 def graph_subscribed(site: sites.Site) -> set[str]:

@@ -57,6 +57,8 @@ class Site:
         description: ``robot.json`` of a robot without a simulation here (a replay's).
         ros: rclpy in the server (``--ros``: ``websim.ros_runtime.RosRuntime`` or
             ``ClassRosRuntime``) while it runs, else None.
+        graph_read_only: with ``--ros``, why nothing on the ROS graph may change the robot
+            (its parameters, ``/reset_simulation``): a graded run's; None: the graph may.
     """
 
     front: WebSocketFront
@@ -69,6 +71,7 @@ class Site:
     headline: str = ""
     description: str | None = None
     ros: Any = None
+    graph_read_only: str | None = None
 
     def close(self) -> None:
         """Close the recordings, save a class's state and release its file (at shutdown)."""
