@@ -74,7 +74,7 @@ def test_deterministic_mode_gives_the_same_score_to_the_last_digit(tmp_path: Pat
     folder = submission(tmp_path / "bob", "heading_pid.py")
     out = tmp_path / "out"
     assert grade("heading_pid_payload", folder, out, "python3", "heading_pid.py",
-                 options=("--runs", "5")) == 0
+                 options=("--runs", "5")) == 1
     graded = report(out, "heading_pid_payload")
     assert graded["spread"]["range"] == 0.0
     runs = [json.loads((out / "heading_pid_payload" / f"run-{k}" / "report.json").read_text())
@@ -104,7 +104,7 @@ def test_wrong_sign_fails_on_the_heading_step(tmp_path: Path) -> None:
     folder = submission(tmp_path / "dave", "heading_pid.py")
     out = tmp_path / "out"
     assert grade("heading_pid", folder, out, "env", "WEBSIM_KP=-4", "python3",
-                 "heading_pid.py") == 0
+                 "heading_pid.py") == 1
     graded = report(out, "heading_pid")
     assert graded["passed"] is False and graded["score"] == 0.0
     assert graded["reason"].startswith("heading_step: ")
@@ -138,7 +138,7 @@ def test_a_controller_that_never_connects_scores_zero_with_the_reason(tmp_path: 
     folder = submission(tmp_path / "frank", **{"hang.py": "import time\ntime.sleep(600)\n"})
     out = tmp_path / "out"
     assert grade("heading_pid", folder, out, "python3", "hang.py",
-                 options=("--startup-timeout", "3")) == 0
+                 options=("--startup-timeout", "3")) == 1
     graded = report(out, "heading_pid")
     assert graded["score"] == 0.0 and graded["passed"] is False
     assert graded["run"]["ended_by"] == "no_start"
@@ -160,7 +160,7 @@ def test_a_controller_that_stops_answering_scores_zero_with_the_reason(tmp_path:
             time.sleep(0.2)
         """})
     out = tmp_path / "out"
-    assert grade("heading_pid", folder, out, "python3", "mute.py") == 0
+    assert grade("heading_pid", folder, out, "python3", "mute.py") == 1
     graded = report(out, "heading_pid")
     assert graded["score"] == 0.0 and graded["run"]["ended_by"] == "no_answer"
     assert "did not answer /odom within 5 s 3 times" in graded["reason"]
@@ -171,7 +171,7 @@ def test_a_controller_that_stops_answering_scores_zero_with_the_reason(tmp_path:
 def test_a_crash_scores_zero_with_its_last_output(tmp_path: Path) -> None:
     folder = submission(tmp_path / "heidi", **{"crash.py": "raise SystemExit('no idea')\n"})
     out = tmp_path / "out"
-    assert grade("heading_pid", folder, out, "python3", "crash.py") == 0
+    assert grade("heading_pid", folder, out, "python3", "crash.py") == 1
     graded = report(out, "heading_pid")
     assert graded["score"] == 0.0
     assert "the controller ended before the run did" in graded["reason"]
@@ -206,7 +206,7 @@ def test_the_controller_cannot_reset_pause_or_fake_the_graded_run(tmp_path: Path
             time.sleep(0.2)
         """})
     out = tmp_path / "out"
-    assert grade("heading_pid", folder, out, "python3", "reset.py") == 0
+    assert grade("heading_pid", folder, out, "python3", "reset.py") == 1
     graded = report(out, "heading_pid")
     output = graded["controller"]["output_tail"]
     assert "/reset_simulation REFUSED" in output and "cannot be reset" in output

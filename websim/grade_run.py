@@ -19,9 +19,14 @@ the runs ran, whatever their scores, 2 for bad input.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import importlib.metadata
+import importlib.util
 import json
 import os
 import random
+import re
 import statistics
 import sys
 import time
@@ -30,7 +35,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from grading import Scenario, controller_environment, evaluate, load_suite
+from grading import Scenario, Suite, controller_environment, evaluate, load_suite
 from grading.recorded import (
     TRUTH_FILE,
     IncompleteRecordError,
@@ -47,7 +52,13 @@ from websim.grade_server import (
     STARTUP_TIMEOUT_S,
     STEP_TIMEOUT_S,
 )
-from websim.sandbox import SandboxLimits, SimulatorStartError, SubmissionSandbox
+from websim.sandbox import (
+    SandboxLimits,
+    SimulatorStartError,
+    SubmissionRefusedError,
+    SubmissionSandbox,
+)
+from websim.sandbox.submission import submission_digest
 
 REPORT_FILE = "report.json"
 PAGE_FILE = "report.html"
@@ -86,6 +97,8 @@ class GradeOptions:
         startup_timeout_s: how long the controller may take to connect (wall time, s).
         ros: the controller is an rclpy node (``--ros``): the simulator starts the ROS graph,
             the controller gets ``ROS_DOMAIN_ID`` and ``ROS_ARGS``.
+        node_modules: folders of Node modules a controller may ``require`` (roslib for Node:
+            ``NODE_PATH``); default ``node_modules_found()``.
     """
 
     mode: str = "deterministic"
@@ -94,6 +107,53 @@ class GradeOptions:
     runs: int = 1
     startup_timeout_s: float = STARTUP_TIMEOUT_S
     ros: bool = False
+    node_modules: tuple[str, ...] | None = None
+
+
+CHECKOUT_NODE_MODULES = Path(__file__).resolve().parent.parent / "web-interface" / "node_modules"
+"""roslib for Node in a checkout of websim (``npm ci`` in web-interface/): a wheel ships only
+the browser's build of it."""
+
+
+def node_modules_found() -> tuple[str, ...]:
+    """The folders of Node modules a controller gets when none are given: the checkout's."""
+    if (CHECKOUT_NODE_MODULES / "roslib" / "package.json").is_file():
+        return (str(CHECKOUT_NODE_MODULES),)
+    return ()
+
+
+def python_runtime_paths() -> tuple[str, ...]:
+    """Folders a controller must see for websim's Python to import roslibpy.
+
+    Raises:
+        RuntimeError: websim's Python has no roslibpy (the message says how to get it).
+    """
+    spec = importlib.util.find_spec("roslibpy")
+    if spec is None or spec.origin is None:
+        raise RuntimeError(f"websim's Python ({sys.executable}) has no roslibpy, which a "
+                           "graded controller is promised: pip install roslibpy into it "
+                           "(it is a dependency of websim: reinstall websim)")
+    return (str(Path(spec.origin).resolve().parent.parent),)
+
+
+def check_runtime(commands: Sequence[Sequence[str]], options: GradeOptions) -> None:
+    """Check, before grading, that the runtime the controllers are promised is here.
+
+    Python with roslibpy always; roslib for Node when a command runs ``node``.
+
+    Raises:
+        RuntimeError: what is missing, and how to get it.
+    """
+    python_runtime_paths()
+    uses_node = any(command and os.path.basename(command[0]) in ("node", "nodejs")
+                    for command in commands)
+    modules = options.node_modules if options.node_modules is not None \
+        else node_modules_found()
+    if uses_node and not any((Path(folder) / "roslib").is_dir() for folder in modules):
+        raise RuntimeError(
+            "a controller runs node, but this websim has no roslib for Node (a wheel ships "
+            "only the browser's): npm install roslib@1.4.1 into a folder and give its "
+            "node_modules with --node-modules DIR")
 
 
 def ros_environment(sandboxed: bool) -> dict[str, str]:
@@ -132,9 +192,37 @@ def grade_submission(suite_file: str | Path, command: Sequence[str], submission:
                      "report": str(Path(entry.scenario.name) / REPORT_FILE)})
     total = sum(row["weight"] * row["score"] for row in rows) / sum(row["weight"] for row in rows)
     summary = {"suite": suite.name, "total": min(1.0, total), "mode": options.mode,
-               "scenarios": rows}
+               "scenarios": rows, "receipt": receipt(suite_path, suite, submission, options)}
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
+
+
+def receipt(suite_path: Path, suite: Suite, submission: Path,
+            options: GradeOptions) -> dict[str, Any]:
+    """What makes a grade re-runnable exactly: hashes of the submission and the suite, seeds.
+
+    The submission's hash is of what the controller got (``submission_digest``: the ignored
+    names left out); the suite's, of its file and every scenario file it names.
+    """
+    try:
+        submission_sha256: str | None = submission_digest(
+            submission, SandboxLimits().home_bytes // 2)
+    except SubmissionRefusedError:
+        submission_sha256 = None
+    suite_files = dict.fromkeys([suite_path, *(Path(entry.scenario.source) for entry in
+                                               suite.entries)])
+    digest = hashlib.sha256()
+    for path in suite_files:
+        if path.is_file():
+            digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    try:
+        version = importlib.metadata.version("websim")
+    except importlib.metadata.PackageNotFoundError:
+        version = "unknown"
+    return {"submission_sha256": submission_sha256, "suite_sha256": digest.hexdigest(),
+            "seeds": {entry.scenario.name: entry.scenario.seed for entry in suite.entries},
+            "mode": options.mode, "step_on": options.step_on, "runs": options.runs,
+            "ros": options.ros, "websim": version}
 
 
 def grade_scenario(suite_path: Path, scenario: Scenario, command: Sequence[str],
@@ -154,7 +242,7 @@ def grade_scenario(suite_path: Path, scenario: Scenario, command: Sequence[str],
                             "report": str(Path(f"run-{k + 1}") / REPORT_FILE)}
                            for k, r in enumerate(runs)],
                   "spread": {"scores": scores, "median": median,
-                             "range": max(scores) - min(scores),
+                             "range": round(max(scores) - min(scores), 9),
                              "stdev": statistics.pstdev(scores),
                              "metric_values": _metric_spread(runs)}}
         (out / REPORT_FILE).write_text(json.dumps(report, indent=2))
@@ -165,7 +253,7 @@ def grade_run(suite_path: Path, scenario: Scenario, command: Sequence[str],
               submission: Path, out: Path, options: GradeOptions) -> dict[str, Any]:
     """One run of one scenario: sandbox, simulator, controller, score; writes report.json."""
     out.mkdir(parents=True, exist_ok=True)
-    for stale in (out / RUN_FILE, out / REPORT_FILE):
+    for stale in (out / RUN_FILE, out / REPORT_FILE, out / TRUTH_FILE):
         stale.unlink(missing_ok=True)
     recording_dir = out / RECORDING_DIR
     if recording_dir.exists():
@@ -176,8 +264,17 @@ def grade_run(suite_path: Path, scenario: Scenario, command: Sequence[str],
                 bag.rmdir()
     limits = SandboxLimits(wall_time_s=wall_time_limit_s(scenario, options))
     started = time.monotonic()
-    with SubmissionSandbox(submission, limits=limits, no_sandbox=not options.sandboxed,
-                           hidden_paths=[out.resolve()]) as sandbox:
+    node_modules = options.node_modules if options.node_modules is not None \
+        else node_modules_found()
+    with contextlib.ExitStack() as stack:
+        try:
+            sandbox = stack.enter_context(SubmissionSandbox(
+                submission, limits=limits, no_sandbox=not options.sandboxed,
+                hidden_paths=[out.resolve()], visible_paths=python_runtime_paths(),
+                node_path=node_modules))
+        except SubmissionRefusedError as error:
+            return _write(out, {"scenario": scenario.name, "mode": options.mode, "run": None,
+                                "controller": None, **_zero(f"not run: {error}")})
         argv = [sys.executable, "-m", "websim.grade_server", str(suite_path),
                 "--scenario", scenario.name, "--out", str(out.resolve()),
                 "--mode", options.mode, "--step-on", options.step_on,
@@ -216,7 +313,7 @@ def _metric_spread(runs: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
             spread.setdefault(metric["name"], {"values": []})["values"].append(metric["value"])
     for entry in spread.values():
         values = entry["values"]
-        entry["range"] = (max(values) - min(values)) if None not in values else None
+        entry["range"] = round(max(values) - min(values), 9) if None not in values else None
     return spread
 
 
@@ -268,10 +365,15 @@ def score_run(scenario: Scenario, out: Path, options: GradeOptions, *,
     graded.pop("name", None)
     ended_by = run_end["ended_by"]
     if ended_by in ("duration", "end_point"):
+        if not graded["passed"] and scenario.changes:
+            graded["reason"] += changes_hint(scenario)
         return {**base, **graded}, trajectory
     if ended_by == "stopped":
         why = (f"the controller ended before the run did (at t = {run_end['sim_time_s']:.2f} "
                f"s of {scenario.duration_s:g} s): {controller_reason}")
+        last = last_error_line(controller.get("output_tail", ""))
+        if last:
+            why += f": {last}"
     else:
         why = run_end["reason"]
     return {**base, **graded, "score": 0.0, "passed": False, "reason": why,
@@ -291,6 +393,38 @@ def _check_complete(trajectory: Sequence[Sample], run_end: dict[str, Any],
     if last_s < min(run_end["sim_time_s"], scenario.duration_s) - 1e-6:
         raise IncompleteRecordError(f"the record of the ground truth ends at t = {last_s:.2f} s, "
                                     f"before the run's end at {run_end['sim_time_s']:.2f} s")
+
+
+ERROR_LINE = re.compile(r"^\s*(?:[\w.]+(?:Error|Exception|Exit|Interrupt)\b.*|Error: .+|"
+                        r"[\w./-]+: (?:line \d+: )?.*(?:not found|No such file).*)$")
+
+
+def last_error_line(output: str) -> str | None:
+    """The last line of ``output`` that says what went wrong (an exception's last line).
+
+    Python's ``ModuleNotFoundError: No module named 'roslibpy'``, Node's ``Error: ...``, a
+    shell's ``python4: not found``; None if no line says so. At most 300 characters.
+    """
+    for line in reversed(output.splitlines()[-200:]):
+        if ERROR_LINE.match(line):
+            return line.strip()[:300]
+    return None
+
+
+def changes_hint(scenario: Scenario) -> str:
+    """What the scenario changed during the run, for a failure's reason (one clause)."""
+    said = []
+    for change in scenario.changes:
+        parts = [f"{name} to {value!r}" for name, value in change.parameters]
+        if change.payload is not None:
+            parts.append("the payload")
+        if change.mode is not None:
+            parts.append(f"the mode to {change.mode}")
+        if parts:
+            said.append(f"{' and '.join(parts)} at t = {change.at_s:g} s")
+    told = [name for name in controller_environment(scenario) if name.endswith("_CHANGES")]
+    tells = f" ({', '.join(told)} tells the controller; docs/grading.md)" if told else ""
+    return f" (the scenario changed {'; '.join(said)}{tells})" if said else ""
 
 
 def asdict_controller(result: Any) -> dict[str, Any]:

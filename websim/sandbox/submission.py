@@ -15,11 +15,13 @@ that never ends, or a gigabyte. So the grader:
 
 from __future__ import annotations
 
+import contextlib
 import fnmatch
+import hashlib
 import os
 import shutil
 import stat
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 from websim.sandbox.outcome import size_text
@@ -45,42 +47,62 @@ class SubmissionRefusedError(ValueError):
     """The submission cannot be graded as handed in (the student's, not the grader's fault)."""
 
 
-def read_own_file(folder: Path, name: str, max_bytes: int) -> bytes | None:
-    """The bytes of ``folder/name``, a regular file of the folder itself; None if absent.
+@contextlib.contextmanager
+def open_own_file(folder: Path, name: str, max_bytes: int) -> Iterator[int | None]:
+    """``folder/name`` open, a regular file of the folder itself; None if absent.
 
-    Opened without following a link (``O_NOFOLLOW``, relative to the folder's descriptor),
-    without blocking (a pipe), and read to at most ``max_bytes``.
+    Yields its descriptor. Opened without following a link (``O_NOFOLLOW``, relative to
+    the folder's descriptor) and without blocking (a pipe); closed on leaving.
 
     Raises:
-        SubmissionRefusedError: it is a link, not a regular file, or larger than ``max_bytes``.
+        SubmissionRefusedError: it is a link, not a regular file, or larger than
+            ``max_bytes``.
     """
     try:
         folder_fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
     except FileNotFoundError:
-        return None
+        yield None
+        return
     try:
-        try:
-            fd = os.open(name, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC,
-                         dir_fd=folder_fd)
-        except FileNotFoundError:
-            return None
-        except OSError as error:
-            if os.path.islink(os.path.join(folder, name)):
-                raise SubmissionRefusedError(f"{name} is a symbolic link: hand in the file "
-                                        "itself") from None
-            raise SubmissionRefusedError(f"{name} cannot be read: {error.strerror}") from None
+        fd = os.open(name, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC,
+                     dir_fd=folder_fd)
+    except FileNotFoundError:
+        fd = None
+    except OSError as error:
+        if os.path.islink(os.path.join(folder, name)):
+            raise SubmissionRefusedError(f"{name} is a symbolic link: hand in the file "
+                                         "itself") from None
+        raise SubmissionRefusedError(f"{name} cannot be read: {error.strerror}") from None
     finally:
         os.close(folder_fd)
-    with os.fdopen(fd, "rb") as file:
-        status = os.fstat(file.fileno())
+    if fd is None:
+        yield None
+        return
+    try:
+        status = os.fstat(fd)
         if not stat.S_ISREG(status.st_mode):
             raise SubmissionRefusedError(f"{name} is not a regular file")
         if status.st_size > max_bytes:
-            raise SubmissionRefusedError(f"{name} is {size_text(status.st_size)}, more than the "
-                                    f"{size_text(max_bytes)} it may be")
-        data = file.read(max_bytes + 1)
+            raise SubmissionRefusedError(f"{name} is {size_text(status.st_size)}, more than "
+                                         f"the {size_text(max_bytes)} it may be")
+        yield fd
+    finally:
+        os.close(fd)
+
+
+def read_own_file(folder: Path, name: str, max_bytes: int) -> bytes | None:
+    """The bytes of ``folder/name`` (``open_own_file``), at most ``max_bytes``; None if absent.
+
+    Raises:
+        SubmissionRefusedError: as ``open_own_file``.
+    """
+    with open_own_file(folder, name, max_bytes) as fd:
+        if fd is None:
+            return None
+        data = os.read(fd, max_bytes + 1)
     if len(data) > max_bytes:
-        raise SubmissionRefusedError(f"{name} is more than the {size_text(max_bytes)} it may be")
+        raise SubmissionRefusedError(f"{name} is more than the {size_text(max_bytes)} it "
+                                     "may be")
     return data
 
 
@@ -172,3 +194,28 @@ def copy_submission(source: Path, target: Path, max_bytes: int, *,
                 shutil.copyfileobj(reading, writing)
             copy.chmod(stat.S_IMODE(mode) & 0o755 | 0o600)
     return total
+
+
+def submission_digest(source: Path, max_bytes: int) -> str:
+    """SHA-256 of what ``copy_submission`` copies: each entry's path, kind and content.
+
+    The same folder gives the same digest wherever it lies (a grade's receipt).
+
+    Raises:
+        SubmissionRefusedError: as ``plan_copy``.
+    """
+    entries, _ = plan_copy(source, max_bytes)
+    digest = hashlib.sha256()
+    for relative, mode in entries:
+        origin = source / relative
+        kind = "d" if stat.S_ISDIR(mode) else "l" if stat.S_ISLNK(mode) else "f"
+        digest.update(f"{kind} {relative}\0".encode())
+        if kind == "l":
+            digest.update(os.readlink(origin).encode() + b"\0")
+        elif kind == "f":
+            fd = os.open(origin, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
+            with os.fdopen(fd, "rb") as file:
+                while chunk := file.read(1 << 20):
+                    digest.update(chunk)
+            digest.update(b"\0")
+    return digest.hexdigest()
