@@ -108,6 +108,18 @@ def test_run_autograder_writes_gradescope_results(tmp_path: Path) -> None:
     assert tests[0]["status"] == "passed" and tests[0]["score"] == tests[0]["max_score"]
     assert tests[1]["status"] == "failed" and "heading_step" in tests[1]["output"]
     assert results["score"] == pytest.approx(sum(test["score"] for test in tests), abs=1e-3)
+    # Gradescope's conventions: Markdown output, per-test visibility (suite.yaml hides the
+    # bonus until the due date), the time a run took, a leaderboard, a receipt to re-run
+    assert results["output_format"] == "md" and results["execution_time"] > 0
+    assert [test["visibility"] for test in tests] == ["visible", "after_due_date"]
+    assert all(test["output_format"] == "md" for test in tests)
+    assert results["leaderboard"][0]["name"] == "heading_pid: heading_step (s)"
+    assert results["leaderboard"][0]["order"] == "asc"
+    receipt = results["extra_data"]["receipt"]
+    assert len(receipt["submission_sha256"]) == 64 and len(receipt["suite_sha256"]) == 64
+    assert receipt["seeds"] == {"heading_pid": 0, "heading_pid_payload": 0}
+    assert "value None" not in json.dumps(results)
+    assert stat.S_IMODE((root / "results" / "results.json").stat().st_mode) == 0o600
 
 
 def test_run_autograder_without_a_submission_file_gives_a_readable_zero(tmp_path: Path) -> None:

@@ -81,8 +81,12 @@ def test_deterministic_mode_gives_the_same_score_to_the_last_digit(tmp_path: Pat
             for k in range(1, 6)]
     metrics = [run["metrics"] for run in runs]
     assert all(m == metrics[0] for m in metrics), "metrics differ between identical runs"
-    # the payload bonus: the plain PID slips and fails, the same way every time
+    # the payload bonus: the plain PID slips and fails, the same way every time, and the
+    # reason says what changed at 5 s and how the controller is told
     assert runs[0]["score"] < 1.0
+    assert "the scenario changed setpoint_rad to 0.0 and the payload at t = 5 s" \
+        in graded["reason"]
+    assert "WEBSIM_SETPOINT_RAD_CHANGES tells the controller" in graded["reason"]
 
 
 def test_wall_clock_mode_reports_its_spread_within_the_tolerance(
@@ -168,15 +172,22 @@ def test_a_controller_that_stops_answering_scores_zero_with_the_reason(tmp_path:
     assert "answering nothing" in graded["controller"]["output_tail"]
 
 
-def test_a_crash_scores_zero_with_its_last_output(tmp_path: Path) -> None:
-    folder = submission(tmp_path / "heidi", **{"crash.py": "raise SystemExit('no idea')\n"})
+def test_a_crash_scores_zero_with_its_last_output(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The reason says why, where the instructor looks: the exception's last line in the
+    terminal and report.json; report.html shows no passing row for the run."""
+    folder = submission(tmp_path / "heidi", **{"crash.py": "import json\njson.loads('{')\n"})
     out = tmp_path / "out"
     assert grade("heading_pid", folder, out, "python3", "crash.py") == 1
     graded = report(out, "heading_pid")
     assert graded["score"] == 0.0
     assert "the controller ended before the run did" in graded["reason"]
-    assert "exited with code 1" in graded["reason"]
-    assert "no idea" in graded["controller"]["output_tail"]
+    assert "exited with code 1: json.decoder.JSONDecodeError: Expecting property name" \
+        in graded["reason"]
+    assert "JSONDecodeError: Expecting property name" in capsys.readouterr().out
+    assert "json.loads('{')" in graded["controller"]["output_tail"]
+    page = (out / "heading_pid" / "report.html").read_text()
+    assert "<td>yes</td>" not in page and "not judged" in page
 
 
 def test_the_controller_cannot_reset_pause_or_fake_the_graded_run(tmp_path: Path) -> None:

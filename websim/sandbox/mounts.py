@@ -181,6 +181,7 @@ def runtime_commands(folder: Path, python: str = sys.executable) -> Path:
     by (its ``pyvenv.cfg`` beside it), which a link elsewhere would lose.
     """
     folder.mkdir(parents=True, exist_ok=True)
+    folder.chmod(0o755)  # whatever the grader's umask: the sandbox's user runs them
     for name in RUNTIME_COMMANDS:
         script = folder / name
         script.write_text(f"#!/bin/sh\nexec {shlex.quote(python)} \"$@\"\n")
