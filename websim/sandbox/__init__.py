@@ -39,8 +39,9 @@ lets users make user namespaces):
    controller's alone; unprivileged, the kernel counts it per user namespace). Where the
    grader may make a cgroup (``cgroups.py``: v1 or v2, as root or delegated) the controller
    runs in one of its own, which bounds the memory of all its processes as the kernel counts
-   it (socket buffers included), their number, and their CPU (a low weight and a quota of
-   ``cpus`` cores: a controller burning every core cannot starve a simulator); elsewhere it
+   it (socket buffers included), their number, and their CPU (one process's weight for them
+   all, and a quota of ``cpus`` cores: a controller burning every core cannot starve a
+   simulator); elsewhere it
    runs at a lower priority (``nice``). Its memory is sampled besides (``watch.py``,
    10 Hz: the cgroup's count, else its processes' resident memory, plus its network's socket
    queues) and over the limit ends the run, as does the wall-clock limit: the sandbox then

@@ -4,9 +4,9 @@ What a cgroup bounds that resource limits cannot: the memory of all the controll
 processes together *as the kernel counts it*, socket buffers included (cgroup v2 counts every
 socket's; v1 counts the kernel memory of local sockets with the rest, and TCP's buffers
 under ``memory.kmem.tcp.limit_in_bytes``, which this sets), its processes together
-(``pids.max``), and its share of the CPU (``cpu.shares`` / ``cpu.weight`` low and a quota
-of ``cpus`` cores), so that a controller burning every core cannot starve its own or a
-classmate's simulator.
+(``pids.max``), and its share of the CPU (``cpu.shares`` / ``cpu.weight``: one ordinary
+process's, however many it starts, and a quota of ``cpus`` cores), so that a controller
+burning every core cannot starve its own or a classmate's simulator.
 
 Made in the grader's own cgroup of each controller (``/proc/self/cgroup``), on v1 (a mount per
 controller, as here) or v2 (one mount; the controllers enabled in the grader's
@@ -26,10 +26,13 @@ from pathlib import Path
 
 CONTROLLERS = ("memory", "pids", "cpu")
 
-CPU_SHARES_V1 = 128
-CPU_WEIGHT_V2 = 12
-"""The controller's CPU weight, against 1024 (v1) and 100 (v2) for every other process (its
-simulator, the grader, another run's simulator): an eighth of one, whatever it forks."""
+CPU_SHARES_V1 = 1024
+CPU_WEIGHT_V2 = 100
+"""The controller's CPU weight: all its processes together weigh as one ordinary process
+(1024 in v1, 100 in v2) against its simulator, the grader or another run's simulator,
+however many it forks. Not lower: in deterministic mode the run goes as fast as the
+controller answers, and a busy machine would starve a fair controller (measured: a weight of
+an eighth made the six-scenario suite 1.5-3x slower on a loaded machine)."""
 
 CPU_PERIOD_US = 100_000
 
@@ -89,7 +92,7 @@ class Cgroup:
             memory_bytes: the memory of all its processes together (and TCP's buffers: a
                 ``TCP_SHARE``-th of it, v1).
             processes: processes and threads together.
-            cpus: its CPU time as cores' worth (a quota), besides its low weight.
+            cpus: its CPU time as cores' worth (a quota), besides its weight.
         """
         mounts, own = _mounts(), _own_paths()
         name = f"websim-sandbox-{os.getpid()}-{secrets.token_hex(4)}"

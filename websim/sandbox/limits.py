@@ -48,7 +48,8 @@ class SandboxLimits:
         output_tail_bytes: how much of the controller's output (stdout and stderr together)
             is kept: the last this many bytes; the rest is counted and dropped.
         cpus: the CPU time its processes may have together, in cores (a cgroup's quota,
-            where one can be made; its weight is low besides, ``cgroups.CPU_SHARES_V1``).
+            where one can be made; all of them weigh as one process besides,
+            ``cgroups.CPU_SHARES_V1``).
     """
 
     wall_time_s: float = 600.0
