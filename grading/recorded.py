@@ -51,34 +51,43 @@ class TruthLog:
     Args:
         simulation: the run's simulation (never reset during a graded run).
         sim_time_s: the run's time since its start (s), as its messages are stamped.
+        path: where the record is written: as soon as the run has ended (``ended``), before
+            the server's shutdown (which a grader may cut short), and again at its end.
+        ended: whether the run has ended (checked after each tick).
     """
 
-    def __init__(self, simulation: Simulation, sim_time_s: Callable[[], float]) -> None:
+    def __init__(self, simulation: Simulation, sim_time_s: Callable[[], float], path: Path,
+                 ended: Callable[[], bool]) -> None:
         self._simulation = simulation
         self._sim_time_s = sim_time_s
         self._start_tick = simulation.tick
+        self._path, self._ended = path, ended
+        self._written = False
         self.rows: list[tuple[int, float, float, float, float, float, float, bool]] = []
 
     def after_tick(self) -> None:
         """The schedule's tick listener: the tick's true pose, command and contact.
 
         A tick in which the robot did not move (the simulation's tick count unchanged) adds
-        nothing.
+        nothing. The tick that ends the run writes the record.
         """
         sim = self._simulation
         tick = sim.tick - self._start_tick
-        if tick <= (self.rows[-1][0] if self.rows else 0):
-            return
-        pose, command = sim.ground_truth(), sim.last_command
-        self.rows.append((tick, round(self._sim_time_s(), 9), pose.x, pose.y, pose.theta,
-                          command.linear_mps, command.angular_rps, sim.state().collided))
+        if tick > (self.rows[-1][0] if self.rows else 0):
+            pose, command = sim.ground_truth(), sim.last_command
+            self.rows.append((tick, round(self._sim_time_s(), 9), pose.x, pose.y, pose.theta,
+                              command.linear_mps, command.angular_rps, sim.state().collided))
+        if not self._written and self._ended():
+            self._written = True
+            self.write()
 
-    def write(self, path: Path, **notes: Any) -> None:
+    def write(self, **notes: Any) -> None:
         """Write the record (atomically: a reader sees all of it or none), and ``notes``.
 
         ``notes``: what else the report should say (the recording's health: its messages
         lost, its size limit reached).
         """
+        path = self._path
         temporary = path.with_name(f".{path.name}.tmp")
         temporary.write_text(json.dumps({"columns": TRUTH_COLUMNS, "rows": self.rows,
                                          "notes": notes}))

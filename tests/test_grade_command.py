@@ -14,6 +14,7 @@ from typing import Any
 import pytest
 
 from websim import cli
+from websim.grade_command import umask_for
 from websim.grade_run import WALL_CLOCK_SCORE_TOLERANCE
 
 SOLUTIONS = Path(__file__).resolve().parent.parent / "examples" / "solutions"
@@ -276,3 +277,22 @@ def test_the_slew_limited_heading_pid_passes_the_payload_bonus(tmp_path: Path) -
     assert graded["passed"] is True and graded["score"] == 1.0
     steps = graded["metrics"][0]["figures"]["steps"]
     assert len(steps) == 2 and all(step["settling_time_s"] < 3.0 for step in steps)
+
+
+def test_the_exit_status_follows_the_verdict_or_fail_under(tmp_path: Path) -> None:
+    """0 passed, 1 failed, 2 bad input; --fail-under moves the bar to a total."""
+    good = submission(tmp_path / "alice", "heading_pid.py")
+    assert grade("heading_pid", good, tmp_path / "a", "python3", "heading_pid.py",
+                 options=("--fail-under", "0.99")) == 0
+    wrong = submission(tmp_path / "dave", "heading_pid.py")
+    assert grade("heading_pid", wrong, tmp_path / "d", "env", "WEBSIM_KP=-4", "python3",
+                 "heading_pid.py", options=("--fail-under", "0")) == 0
+    assert grade("heading_pid", wrong, tmp_path / "d", "python3", "missing.py") == 1
+    assert grade("heading_pid", wrong, tmp_path / "d", "python3", "heading_pid.py",
+                 options=("--fail-under", "2")) == 2
+
+
+def test_output_modes_give_folders_x_where_files_have_r() -> None:
+    assert umask_for(0o600) == 0o077
+    assert umask_for(0o640) == 0o027
+    assert umask_for(0o644) == 0o022

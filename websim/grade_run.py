@@ -343,11 +343,15 @@ def score_run(scenario: Scenario, out: Path, options: GradeOptions, *,
                                 f"ended with: {server_tail[-400:]}"), "run": None}, []
     run_end = json.loads(run_file.read_text())
     base["run"] = run_end
+    completed = run_end["ended_by"] in ("duration", "end_point")
     try:
         trajectory, notes = trajectory_from_truth(out / TRUTH_FILE, scenario)
         _check_complete(trajectory, run_end, scenario)
     except IncompleteRecordError as error:
-        return {**base, **_zero(f"invalid run: {error}"), "invalid": True}, []
+        if completed:
+            return {**base, **_zero(f"invalid run: {error}"), "invalid": True}, []
+        return {**base, **_zero(_early_end_reason(run_end, scenario, controller,
+                                                  controller_reason))}, []
     try:
         base["recording"] = str(bag_folder(out / RECORDING_DIR))
     except FileNotFoundError as error:
@@ -363,21 +367,24 @@ def score_run(scenario: Scenario, out: Path, options: GradeOptions, *,
     result = evaluate(scenario, trajectory)
     graded = result.to_json()
     graded.pop("name", None)
-    ended_by = run_end["ended_by"]
-    if ended_by in ("duration", "end_point"):
+    if completed:
         if not graded["passed"] and scenario.changes:
             graded["reason"] += changes_hint(scenario)
         return {**base, **graded}, trajectory
-    if ended_by == "stopped":
-        why = (f"the controller ended before the run did (at t = {run_end['sim_time_s']:.2f} "
-               f"s of {scenario.duration_s:g} s): {controller_reason}")
-        last = last_error_line(controller.get("output_tail", ""))
-        if last:
-            why += f": {last}"
-    else:
-        why = run_end["reason"]
+    why = _early_end_reason(run_end, scenario, controller, controller_reason)
     return {**base, **graded, "score": 0.0, "passed": False, "reason": why,
             "score_if_completed": graded["score"]}, trajectory
+
+
+def _early_end_reason(run_end: dict[str, Any], scenario: Scenario,
+                      controller: dict[str, Any], controller_reason: str) -> str:
+    """Why a run that did not run its course scores 0 (with the controller's last error)."""
+    if run_end["ended_by"] != "stopped":
+        return str(run_end["reason"])
+    why = (f"the controller ended before the run did (at t = {run_end['sim_time_s']:.2f} "
+           f"s of {scenario.duration_s:g} s): {controller_reason}")
+    last = last_error_line(controller.get("output_tail", ""))
+    return f"{why}: {last}" if last else why
 
 
 def _check_complete(trajectory: Sequence[Sample], run_end: dict[str, Any],

@@ -328,7 +328,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     lock_step = LockStep(scenario, robot, clock, subscribed, connected, mode=args.mode,
                          step_on=args.step_on, out=args.out,
                          startup_timeout_s=args.startup_timeout)
-    truth = TruthLog(simulation, lambda: lock_step.sim_time_s)
+    truth = TruthLog(simulation, lambda: lock_step.sim_time_s, args.out / TRUTH_FILE,
+                     lambda: lock_step.finished is not None)
     schedule = site.schedule()
     schedule.gates.append(lock_step.gate)
     schedule.tick_listeners.append(lock_step.after_tick)
@@ -338,8 +339,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if lock_step.finished is None:
             lock_step.write()
-        truth.write(args.out / TRUTH_FILE,
-                    recording=[recording.health() for recording in recorder.recordings])
+        truth.write(recording=[recording.health() for recording in recorder.recordings])
 
 
 def graph_subscribed(site: sites.Site) -> set[str]:
