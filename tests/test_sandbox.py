@@ -729,8 +729,10 @@ def test_socket_buffers_count_against_the_memory_limit(tmp_path: Path, kind: str
     lines = [line for line in result.output_tail.splitlines() if line.startswith("queued")]
     queued = int(lines[-1].split()[1]) if lines else 0
     assert 0 < queued < 256 * MIB + 16 * MIB, (queued, result.reason)
-    if kind == "unix":  # counted with its memory: the run ends at the limit
-        assert result.ended_by == "memory", (result.reason, result.output_tail[-300:])
+    if kind == "unix":  # counted with its memory: the run ends at the limit (the sandbox
+        # stops it, or the kernel kills it first at its cgroup's limit)
+        assert result.ended_by == "memory" or (
+            result.signal == "SIGKILL" and "memory" in result.limits_hit), result.reason
 
 
 def test_the_system_call_filter_builds_here() -> None:
