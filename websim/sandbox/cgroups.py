@@ -178,6 +178,13 @@ class Cgroup:
         return (_number(self._read("memory", "memory.usage_in_bytes"))
                 + _number(self._read("memory", "memory.kmem.tcp.usage_in_bytes")))
 
+    def peak_memory_bytes(self) -> int:
+        """The most memory it has held (the kernel's own peak: no sample misses it)."""
+        if self.v2:
+            return _number(self._read("memory", "memory.peak"))
+        return (_number(self._read("memory", "memory.max_usage_in_bytes"))
+                + _number(self._read("memory", "memory.kmem.tcp.max_usage_in_bytes")))
+
     def tasks(self) -> int:
         """Its processes and threads now (0 without the pids controller)."""
         return _number(self._read("pids", "pids.current"))

@@ -151,6 +151,8 @@ class ControllerResult:
         signal_name = _signal_name(signum) if signum is not None else None
         if observed.stopped_by is not None:
             ended_by = observed.stopped_by
+        elif observed.oom_killed and signal_name == "SIGKILL":
+            ended_by = "memory"  # the kernel killed it at its cgroup's memory limit
         else:
             ended_by = "signal" if signum is not None else "exit"
         exit_code = None if signum is not None else status

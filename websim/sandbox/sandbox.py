@@ -178,6 +178,8 @@ class SubmissionSandbox:
         self._server_pidfd: int | None = None
         self._netns_fd: int | None = None
         self._userns_fd: int | None = None
+        self._server_child: int | None = None
+        """The simulator's process inside its network namespace (bwrap's child)."""
         self._uid: int | None = None
         self._cgroup: Cgroup | None = None
         self.copied_bytes = 0
@@ -361,6 +363,7 @@ class SubmissionSandbox:
             raise SimulatorStartError("the simulator's process ended before its network "
                                   "namespace could be joined")
         self._netns_fd = netns_fd
+        self._server_child = pid
         if not self._privileged:  # its network namespace belongs to its user namespace
             self._userns_fd = os.open(f"/proc/{pid}/ns/user", os.O_RDONLY | os.O_CLOEXEC)
 
@@ -392,7 +395,7 @@ class SubmissionSandbox:
             if fd is not None:
                 os.close(fd)
         self._server = self._server_output = None
-        self._server_pidfd = self._netns_fd = self._userns_fd = None
+        self._server_pidfd = self._netns_fd = self._userns_fd = self._server_child = None
         return ServerOutcome(server.returncode,
                              output.tail.decode("utf-8", errors="replace"))
 
@@ -540,6 +543,8 @@ class SubmissionSandbox:
             time.sleep(SAMPLE_PERIOD_S)
         ended = time.monotonic()
         process.returncode = os.waitstatus_to_exitcode(status)
+        if cgroup is not None:
+            peak_memory = max(peak_memory, cgroup.peak_memory_bytes())
         # What it left behind: its session's processes without the sandbox; in it, none
         # (its process namespace ended with it), unless the kernel is slow to say so.
         if match:
@@ -556,21 +561,24 @@ class SubmissionSandbox:
     def _sample(self, match: Mapping[str, int]) -> tuple[int, int]:
         """The controller's processes and threads now, and its memory (bytes).
 
-        Its memory: as its cgroup counts it (v2: socket buffers included; v1: its TCP
-        buffers added, and its UDP queues), else its processes' resident memory and its
-        network namespace's socket queues.
+        With a cgroup, its counts (v2: socket buffers included; v1: TCP's buffers under
+        their own count, added, and its network's UDP queues); no scan of ``/proc``. Else its
+        processes' resident memory and its network namespace's TCP and UDP queues.
         """
-        now = usage(**match) if match else None
-        tasks = now.tasks if now is not None else 0
         cgroup = self._cgroup
-        sockets = 0
-        server_pid = self._server.pid if self._server is not None else None
-        if (cgroup is None or not cgroup.v2) and self.sandboxed:
-            probe = now.pids[0] if now is not None and now.pids else server_pid
-            sockets = socket_bytes(probe) if probe is not None else 0
         if cgroup is not None:
-            return max(tasks, cgroup.tasks()), cgroup.memory_bytes() + sockets
-        return tasks, (now.rss_bytes if now is not None else 0) + sockets
+            udp = 0
+            if not cgroup.v2 and self._server_child is not None:
+                udp = socket_bytes(self._server_child, ("udp", "udp6"))
+            return cgroup.tasks(), cgroup.memory_bytes() + udp
+        now = usage(**match) if match else None
+        if now is None:
+            return 0, 0
+        sockets = 0
+        if self.sandboxed:
+            probe = now.pids[0] if now.pids else self._server_child
+            sockets = socket_bytes(probe) if probe is not None else 0
+        return now.tasks, now.rss_bytes + sockets
 
     def _stop_controller(self, process: subprocess.Popen[bytes],
                          match: Mapping[str, int]) -> None:

@@ -156,14 +156,15 @@ def _pid_namespace(pid: str) -> int | None:
 SOCKET_TABLES = ("tcp", "tcp6", "udp", "udp6")
 
 
-def socket_bytes(pid: int) -> int:
+def socket_bytes(pid: int, tables: tuple[str, ...] = SOCKET_TABLES) -> int:
     """The bytes queued in the sockets of ``pid``'s network namespace (sent and received).
 
-    From ``/proc/PID/net/{tcp,udp}{,6}``: each socket's ``tx_queue`` and ``rx_queue``
-    (what the kernel holds for it). 0 once the process has gone.
+    From ``/proc/PID/net/TABLE`` (``tcp``, ``udp`` and their ``6``): each socket's
+    ``tx_queue`` and ``rx_queue`` (what the kernel holds for it). 0 once the process has
+    gone.
     """
     total = 0
-    for table in SOCKET_TABLES:
+    for table in tables:
         try:
             with open(f"/proc/{pid}/net/{table}", "rb") as file:
                 lines = file.read().splitlines()[1:]
