@@ -82,6 +82,8 @@ class Site:
         admin_token: the instructor's token (a class's: given, or kept in its state file);
             empty: the caller's.
         replay: a replay's player (``websim.replay.ReplayHost``), else None.
+        graph_read_only: with ``--ros``, why nothing on the ROS graph may change the robot
+            (its parameters, ``/reset_simulation``): a graded run's; None: the graph may.
     """
 
     front: WebSocketFront
@@ -98,6 +100,7 @@ class Site:
     ros_parameters: dict[str, Any] = field(default_factory=dict)
     admin_token: str = ""
     replay: Any = None
+    graph_read_only: str | None = None
 
     def close(self) -> None:
         """Close the recordings, save a class's state and release its file (at shutdown)."""
