@@ -20,6 +20,7 @@ import argparse
 import json
 import os
 import shutil
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -27,7 +28,7 @@ from typing import Any
 
 from grading import load_suite
 from websim.grade_class import SUBMISSION_FILE, grade_class
-from websim.grade_run import GradeOptions, grade_submission
+from websim.grade_run import GradeOptions, check_runtime, grade_submission
 
 ROOT = Path(__file__).resolve().parent.parent
 SUITE = ROOT / "examples" / "scenarios" / "wall_following_suite.yaml"
@@ -44,6 +45,7 @@ def main() -> None:
     args = parser.parse_args()
     sandboxed = shutil.which("bwrap") is not None and os.geteuid() == 0
     options = GradeOptions(sandboxed=sandboxed)
+    check_runtime([COMMAND], options)  # no roslibpy: say so now, not as a total of 0
     figures: dict[str, Any] = {"sandboxed": sandboxed, "cores": os.cpu_count(),
                                "students": []}
     with tempfile.TemporaryDirectory(prefix="bench-grade-") as temporary:
@@ -62,7 +64,8 @@ def main() -> None:
                 scenarios.append({"name": row["name"], "sim_time_s": sim_s,
                                   "wall_time_s": report["wall_time_s"],
                                   "real_time_factor": report["real_time_factor"],
-                                  "score": row["score"]})
+                                  "score": row["score"], "passed": row["passed"],
+                                  "reason": row["reason"]})
             sim_total = sum(s["sim_time_s"] for s in scenarios)
             figures["students"].append({"wall_time_s": round(wall_s, 2),
                                         "sim_time_s": round(sim_total, 2),
@@ -83,7 +86,23 @@ def main() -> None:
                                 "totals": sorted({round(r["total"], 6) for r in rows})}
     if args.json:
         print(json.dumps(figures, indent=2))
-        return
+    else:
+        print_figures(figures)
+    failed = [(k + 1, scenario["name"], scenario["reason"])
+              for k, result in enumerate(figures["students"])
+              for scenario in result["scenarios"] if not scenario["passed"]]
+    failed += [(0, "class", f"totals {figures['class']['totals']}")
+               for _ in [0] if "class" in figures and figures["class"]["totals"] != [1.0]]
+    if failed:  # a benchmark of a reference that fails measures nothing: say so, loudly
+        for student, name, reason in failed:
+            print(f"bench_grade: FAILED: the reference's {name} (student {student}): {reason}",
+                  file=sys.stderr)
+        raise SystemExit(1)
+
+
+def print_figures(figures: dict[str, Any]) -> None:
+    """The figures, one line per student and per scenario."""
+    sandboxed = figures["sandboxed"]
     print(f"sandbox: {'bubblewrap' if sandboxed else 'none (--no-sandbox)'}; "
           f"{figures['cores']} cores")
     for k, result in enumerate(figures["students"]):

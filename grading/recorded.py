@@ -1,17 +1,29 @@
-"""A graded run's trajectory read back from its recording (rosbag2, MCAP storage).
+"""A graded run's trajectory: from the simulation itself (``TruthLog``), or its recording.
 
-The samples are the recording's ``/ground_truth`` (the true pose in the ``map`` frame, one per
-tick), each with the ``/cmd_vel`` in force during the tick that ended there: the last command
-the robot accepted before that tick's time (a command stamped at tick N's time arrived after
-tick N's messages and drove tick N + 1), clamped to the robot's limits as the robot clamps it.
-The recording carries no contact flag, so the metrics find contacts from the geometry
-(``grading.geometry``; the docs say both find the same first contact). Times are sim time
+What the score reads is the simulation's own record (``TruthLog``): the grade server takes
+the true pose, the command in force and the contact flag from the simulation after every
+tick, into memory it alone holds (one sample per tick, no queue a client could fill), and
+writes ``truth.json`` when the run ends; ``trajectory_from_truth`` reads it back and refuses a
+record with a gap (``IncompleteRecordError``: the run is then invalid, never scored from
+gaps). The recording (rosbag2, MCAP storage) is for people and tools; its queue may drop
+messages when a client floods it, so the score never depends on it.
+
+From the recording (``trajectory_from_bag``: a second reading, which the tests hold equal to
+the first for a fair controller), the samples are its ``/ground_truth`` (the true pose in the
+``map`` frame, one per tick), each with the ``/cmd_vel`` in force during the tick that ended
+there: the last command the robot accepted before that tick's time (a command stamped at
+tick N's time arrived after tick N's messages and drove tick N + 1), clamped to the robot's
+limits as the robot clamps it. The recording carries no contact flag, so the metrics find
+contacts from the geometry (``grading.geometry``; the docs say both find the same first
+contact). Times are sim time
 since the start: a message's stamp minus the run's ``epoch_s`` (``run.json``).
 """
 
 from __future__ import annotations
 
+import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -20,9 +32,105 @@ from rosbags.typesys import Stores, get_typestore
 
 from grading.scenario import Scenario
 from grading.trajectory import Sample
+from physics.simulation import Simulation
 
 GROUND_TRUTH = "/ground_truth"
 CMD_VEL = "/cmd_vel"
+
+TRUTH_FILE = "truth.json"
+TRUTH_COLUMNS = ("tick", "t_s", "x_m", "y_m", "yaw_rad", "v_cmd_mps", "w_cmd_rps", "collided")
+
+
+class IncompleteRecordError(ValueError):
+    """The run's record of the truth has a gap or is missing: the run cannot be scored."""
+
+
+class TruthLog:
+    """The simulation's own record of a run, one sample per tick (the grade server's).
+
+    Args:
+        simulation: the run's simulation (never reset during a graded run).
+        sim_time_s: the run's time since its start (s), as its messages are stamped.
+        path: where the record is written: as soon as the run has ended (``ended``), before
+            the server's shutdown (which a grader may cut short), and again at its end.
+        ended: whether the run has ended (checked after each tick).
+    """
+
+    def __init__(self, simulation: Simulation, sim_time_s: Callable[[], float], path: Path,
+                 ended: Callable[[], bool]) -> None:
+        self._simulation = simulation
+        self._sim_time_s = sim_time_s
+        self._start_tick = simulation.tick
+        self._path, self._ended = path, ended
+        self._written = False
+        self.rows: list[tuple[int, float, float, float, float, float, float, bool]] = []
+
+    def after_tick(self) -> None:
+        """The schedule's tick listener: the tick's true pose, command and contact.
+
+        A tick in which the robot did not move (the simulation's tick count unchanged) adds
+        nothing. The tick that ends the run writes the record.
+        """
+        sim = self._simulation
+        tick = sim.tick - self._start_tick
+        if tick > (self.rows[-1][0] if self.rows else 0):
+            pose, command = sim.ground_truth(), sim.last_command
+            self.rows.append((tick, round(self._sim_time_s(), 9), pose.x, pose.y, pose.theta,
+                              command.linear_mps, command.angular_rps, sim.state().collided))
+        if not self._written and self._ended():
+            self._written = True
+            self.write()
+
+    def write(self, **notes: Any) -> None:
+        """Write the record (atomically: a reader sees all of it or none), and ``notes``.
+
+        ``notes``: what else the report should say (the recording's health: its messages
+        lost, its size limit reached).
+        """
+        path = self._path
+        temporary = path.with_name(f".{path.name}.tmp")
+        temporary.write_text(json.dumps({"columns": TRUTH_COLUMNS, "rows": self.rows,
+                                         "notes": notes}))
+        temporary.replace(path)
+
+
+def trajectory_from_truth(path: Path, scenario: Scenario
+                          ) -> tuple[list[Sample], dict[str, Any]]:
+    """The run's trajectory from ``truth.json`` (the start, then each tick's), and its notes.
+
+    Cut as ``grading.run_headless`` cuts a run: at ``duration_s``, or at the first sample
+    within the scenario's ``end``.
+
+    Raises:
+        IncompleteRecordError: the file is missing, unreadable, or a tick is missing from it
+            (the message says which).
+    """
+    try:
+        document = json.loads(path.read_text())
+        rows, notes = document["rows"], dict(document.get("notes") or {})
+        if list(document["columns"]) != list(TRUTH_COLUMNS):
+            raise ValueError(f"columns {document['columns']}")
+    except FileNotFoundError:
+        raise IncompleteRecordError("the simulator wrote no record of the run's ground truth "
+                                    "(it did not end cleanly)") from None
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise IncompleteRecordError(f"the record of the run's ground truth cannot be read: "
+                                    f"{error}") from None
+    start = scenario.start
+    samples = [Sample(0.0, start.x, start.y, start.theta, 0.0, 0.0, False)]
+    end = scenario.end
+    for expected, row in enumerate(rows, start=1):
+        tick, t_s, x_m, y_m, yaw, v_mps, w_rps, collided = row
+        if tick != expected:
+            raise IncompleteRecordError(f"the record of the run's ground truth has no tick "
+                                        f"{expected} (the next is {tick}): not scored from gaps")
+        if t_s > scenario.duration_s + 1e-6:
+            break
+        samples.append(Sample(float(t_s), float(x_m), float(y_m), float(yaw), float(v_mps),
+                              float(w_rps), bool(collided)))
+        if end is not None and math.hypot(x_m - end.x_m, y_m - end.y_m) <= end.radius_m:
+            break
+    return samples, notes
 
 
 def bag_folder(recording_dir: Path) -> Path:

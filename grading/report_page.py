@@ -17,12 +17,17 @@ from typing import Any
 import numpy as np
 
 from grading.geometry import side_distance_m, world_shapes
+from grading.results import figure
 from grading.scenario import Scenario
 from grading.trajectory import Trajectory, unwrapped_yaw
 
-PLOT_W, PLOT_H = 640, 200
+PLOT_W, PLOT_H = 760, 220
 MAP_PX = 480
 MARGIN = 40
+PLOT_LEFT = 60
+"""Left of the plotting area: the value axis's labels."""
+LEGEND_W = 130
+"""Right of the plotting area: the legend."""
 
 Series = tuple[str, str, Sequence[float], Sequence[float]]
 """(label, colour, times s, values)."""
@@ -36,14 +41,22 @@ def report_html(scenario: Scenario, trajectory: Trajectory, report: Mapping[str,
              f"<p>{html.escape(scenario.description)} ({html.escape(str(report.get('mode')))} "
              f"mode, seed {scenario.seed})</p>",
              "<h2>Trajectory (ground truth, map frame)</h2>", trajectory_svg(scenario, trajectory),
-             "<h2>Metrics</h2>", metrics_table(report.get("metrics", []))]
+             "<h2>Metrics</h2>"]
+    completed = "score_if_completed" not in report and not report.get("invalid")
+    if not completed:
+        parts.append("<p>The run did not run its course, so it scores 0: what the metrics "
+                     "would have found until it ended:</p>")
+    parts.append(metrics_table(report.get("metrics", []), completed=completed))
     for name, unit, series in time_series(scenario, trajectory):
         parts += [f"<h3>{html.escape(name)}</h3>", plot_svg(series, unit)]
     run = report.get("run") or {}
     if run:
         parts.append(f"<h2>The run</h2><p>{html.escape(str(run.get('reason')))}: "
-                     f"{run.get('sim_time_s')} s of sim time, {run.get('commands')} commands, "
-                     f"{run.get('missed_steps')} missed steps</p>")
+                     f"{figure(run.get('sim_time_s'), 's')} of sim time, "
+                     f"{run.get('commands')} commands, {run.get('missed_steps')} missed "
+                     "steps</p>")
+    if report.get("recording_note"):
+        parts.append(f"<p>{html.escape(str(report['recording_note']))}</p>")
     if report.get("recording"):
         parts.append(f"<p>Recording: <code>{html.escape(str(report['recording']))}</code> "
                      "(open the .mcap in Foxglove or Lichtblick, or <code>websim replay</code> "
@@ -60,19 +73,25 @@ def report_html(scenario: Scenario, trajectory: Trajectory, report: Mapping[str,
             f"</style></head><body>{''.join(parts)}</body></html>")
 
 
-def metrics_table(metrics: Sequence[Mapping[str, Any]]) -> str:
-    """The metrics as a table: name, value, threshold, pass, score, weight, reason."""
+def metrics_table(metrics: Sequence[Mapping[str, Any]], *, completed: bool = True) -> str:
+    """The metrics as a table: name, value, threshold, pass, score, weight, reason.
+
+    A run that did not run its course (``completed`` False: the controller crashed or
+    stopped answering) has no passing row: its metrics say what they would have found,
+    each "not judged".
+    """
     rows = ["<tr><th>metric</th><th>value</th><th>threshold</th><th>pass</th><th>score</th>"
             "<th>weight</th><th>reason</th></tr>"]
     for metric in metrics:
-        value = metric.get("value")
-        shown = "—" if value is None else f"{value:.4g} {metric.get('unit', '')}"
+        unit = metric.get("unit", "")
+        shown = "—" if metric.get("value") is None else figure(metric["value"], unit)
         threshold = metric.get("threshold")
+        verdict = ("yes" if metric.get("passed") else "no") if completed else "not judged"
+        score = f"{metric.get('score', 0.0):.4f}" if completed else "—"
         rows.append(
             f"<tr><td>{html.escape(metric['name'])}</td><td>{html.escape(shown)}</td>"
-            f"<td>{'—' if threshold is None else f'{threshold:g}'}</td>"
-            f"<td>{'yes' if metric.get('passed') else 'no'}</td>"
-            f"<td>{metric.get('score', 0.0):.4f}</td><td>{metric.get('weight', 1):g}</td>"
+            f"<td>{'—' if threshold is None else html.escape(figure(threshold, unit))}</td>"
+            f"<td>{verdict}</td><td>{score}</td><td>{metric.get('weight', 1):g}</td>"
             f"<td>{html.escape(str(metric.get('reason', '')))}</td></tr>")
     return f"<table>{''.join(rows)}</table>"
 
@@ -110,31 +129,72 @@ def time_series(scenario: Scenario, trajectory: Trajectory
     return plots
 
 
+def nice_ticks(low: float, high: float, count: int = 5) -> list[float]:
+    """About ``count`` round values (1, 2 or 5 times a power of ten apart) in [low, high]."""
+    span = high - low
+    if not span > 0.0 or not math.isfinite(span):
+        return [low]
+    raw = span / max(1, count - 1)
+    power = 10.0 ** math.floor(math.log10(raw))
+    step = next(m * power for m in (1.0, 2.0, 5.0, 10.0) if m * power >= raw)
+    first = math.ceil(low / step - 1e-9) * step
+    ticks: list[float] = []
+    value = first
+    while value <= high + 1e-9 * step and len(ticks) < 4 * count:
+        ticks.append(0.0 if abs(value) < step * 1e-9 else value)
+        value += step
+    return ticks
+
+
 def plot_svg(series: Sequence[Series], unit: str) -> str:
-    """Lines over time, with their value range and a legend."""
+    """Lines over time: axes with ticks and their values, and a legend beside the plot.
+
+    The legend stands right of the plotting area, never over the lines.
+    """
     finite = [v for _, _, _, values in series for v in values if math.isfinite(v)]
     t_max = max((max(times) for _, _, times, _ in series if times), default=1.0) or 1.0
     low, high = (min(finite), max(finite)) if finite else (0.0, 1.0)
     if high - low < 1e-9:
         low, high = low - 0.5, high + 0.5
-    width, height = PLOT_W - 2 * MARGIN, PLOT_H - 2 * MARGIN
+    pad = 0.05 * (high - low)
+    low, high = low - pad, high + pad
+    left, top = PLOT_LEFT, MARGIN // 2
+    width, height = PLOT_W - left - LEGEND_W, PLOT_H - top - MARGIN
 
-    def point(t: float, v: float) -> str:
-        return (f"{MARGIN + width * t / t_max:.1f},"
-                f"{MARGIN + height * (1 - (v - low) / (high - low)):.1f}")
+    def x_of(t: float) -> float:
+        return left + width * t / t_max
 
-    lines = [f'<rect x="{MARGIN}" y="{MARGIN}" width="{width}" height="{height}" fill="none" '
-             'stroke="#999"/>',
-             f'<text x="{MARGIN}" y="{MARGIN - 6}" font-size="11">{high:.3g} {unit}</text>',
-             f'<text x="{MARGIN}" y="{PLOT_H - MARGIN + 14}" font-size="11">{low:.3g}; '
-             f'0 to {t_max:.1f} s</text>']
+    def y_of(v: float) -> float:
+        return top + height * (1 - (v - low) / (high - low))
+
+    lines = [f'<rect x="{left}" y="{top}" width="{width}" height="{height}" fill="none" '
+             'stroke="#999"/>']
+    for value in nice_ticks(low, high):
+        y = y_of(value)
+        lines += [f'<line x1="{left - 4}" y1="{y:.1f}" x2="{left + width}" y2="{y:.1f}" '
+                  'stroke="#eee"/>',
+                  f'<text x="{left - 6}" y="{y + 4:.1f}" font-size="11" text-anchor="end">'
+                  f"{value:.3g}</text>"]
+    for t in nice_ticks(0.0, t_max, 8):
+        x = x_of(t)
+        lines += [f'<line x1="{x:.1f}" y1="{top + height}" x2="{x:.1f}" '
+                  f'y2="{top + height + 4}" stroke="#999"/>',
+                  f'<text x="{x:.1f}" y="{top + height + 16}" font-size="11" '
+                  f'text-anchor="middle">{t:g}</text>']
+    lines += [f'<text x="{left + width / 2:.0f}" y="{PLOT_H - 4}" font-size="11" '
+              'text-anchor="middle">t (s, sim time)</text>',
+              f'<text x="12" y="{top + height / 2:.0f}" font-size="11" text-anchor="middle" '
+              f'transform="rotate(-90 12 {top + height / 2:.0f})">{html.escape(unit)}</text>']
     for index, (label, colour, times, values) in enumerate(series):
-        points = " ".join(point(t, v) for t, v in zip(times, values, strict=True)
-                          if math.isfinite(v))
+        points = " ".join(f"{x_of(t):.1f},{y_of(v):.1f}"
+                          for t, v in zip(times, values, strict=True) if math.isfinite(v))
         lines.append(f'<polyline points="{points}" fill="none" stroke="{colour}" '
                      'stroke-width="1.5"/>')
-        lines.append(f'<text x="{PLOT_W - MARGIN - 110}" y="{MARGIN + 14 + 14 * index}" '
-                     f'font-size="11" fill="{colour}">{html.escape(label)}</text>')
+        y = top + 10 + 16 * index
+        lines += [f'<line x1="{left + width + 10}" y1="{y}" x2="{left + width + 26}" '
+                  f'y2="{y}" stroke="{colour}" stroke-width="2"/>',
+                  f'<text x="{left + width + 30}" y="{y + 4}" font-size="11">'
+                  f"{html.escape(label)}</text>"]
     return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{PLOT_W}" height="{PLOT_H}">'
             f"{''.join(lines)}</svg>")
 

@@ -68,3 +68,19 @@ def within_ratio(value: float, limit: float) -> float:
     if value <= limit:
         return 1.0
     return limit / value if limit > 0.0 else 0.0
+
+
+def figure(value: Any, unit: str = "") -> str:
+    """A metric's figure as a person reads it: 4 significant digits and its unit.
+
+    ``0.04499999999999993`` is ``0.045``; None (what it measures never happened) is
+    ``none``; a whole number stays whole.
+    """
+    if value is None:
+        return "none"
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return f"{value} {unit}".strip()
+    if isinstance(value, float) and not math.isfinite(value):
+        return "none"
+    text = f"{value:.4g}" if isinstance(value, float) else str(value)
+    return f"{text} {unit}".strip()

@@ -84,7 +84,10 @@ REQUIRED_KEYS = ("world", "duration_s", "metrics")
 SUITE_KEYS = ("name", "description", "defaults", "scenarios")
 """``defaults`` is not read: it holds what scenarios written inline share, with a YAML anchor
 (``defaults: &defaults``) that each merges (``<<: *defaults``)."""
-SUITE_ENTRY_KEYS = ("file", "scenario", "weight")
+SUITE_ENTRY_KEYS = ("file", "scenario", "weight", "visibility")
+VISIBILITIES = ("visible", "hidden", "after_due_date", "after_published")
+"""A suite entry's ``visibility``: when a student sees its result on Gradescope (its test's
+``visibility``; ``websim grade`` prints every result to the instructor)."""
 CHANGE_KEYS = ("at_s", "payload", "mode", "parameters")
 PAYLOAD_KEYS = ("scale", "mass_kg", "inertia_kg_m2")
 END_KEYS = ("point", "radius_m")
@@ -257,10 +260,11 @@ class Scenario:
 
 @dataclass(frozen=True)
 class SuiteEntry:
-    """A scenario of a suite and its weight in the suite's total."""
+    """A scenario of a suite, its weight in the suite's total and who sees its result."""
 
     scenario: Scenario
     weight: float
+    visibility: str = "visible"
 
 
 @dataclass(frozen=True)
@@ -344,7 +348,11 @@ def load_suite(path: str | Path) -> Suite:
             raise fail(here, f"a second scenario named '{scenario.name}' (the first is "
                              f"{names[scenario.name]}); give each a name of its own")
         names[scenario.name] = entry_name
-        entries.append(SuiteEntry(scenario, weight))
+        visibility = entry.get("visibility", "visible")
+        if visibility not in VISIBILITIES:
+            raise fail(located(source, entry, "visibility", f"{entry_name}.visibility"),
+                       f"expected one of {', '.join(VISIBILITIES)}, got {visibility!r:.40}")
+        entries.append(SuiteEntry(scenario, weight, visibility))
     if sum(entry.weight for entry in entries) <= 0.0:
         raise fail(where, "every weight is 0: give at least one scenario a weight > 0")
     name = _text(source, top, "name", resolved.stem)

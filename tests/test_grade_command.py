@@ -14,6 +14,7 @@ from typing import Any
 import pytest
 
 from websim import cli
+from websim.grade_command import umask_for
 from websim.grade_run import WALL_CLOCK_SCORE_TOLERANCE
 
 SOLUTIONS = Path(__file__).resolve().parent.parent / "examples" / "solutions"
@@ -74,15 +75,19 @@ def test_deterministic_mode_gives_the_same_score_to_the_last_digit(tmp_path: Pat
     folder = submission(tmp_path / "bob", "heading_pid.py")
     out = tmp_path / "out"
     assert grade("heading_pid_payload", folder, out, "python3", "heading_pid.py",
-                 options=("--runs", "5")) == 0
+                 options=("--runs", "5")) == 1
     graded = report(out, "heading_pid_payload")
     assert graded["spread"]["range"] == 0.0
     runs = [json.loads((out / "heading_pid_payload" / f"run-{k}" / "report.json").read_text())
             for k in range(1, 6)]
     metrics = [run["metrics"] for run in runs]
     assert all(m == metrics[0] for m in metrics), "metrics differ between identical runs"
-    # the payload bonus: the plain PID slips and fails, the same way every time
+    # the payload bonus: the plain PID slips and fails, the same way every time, and the
+    # reason says what changed at 5 s and how the controller is told
     assert runs[0]["score"] < 1.0
+    assert "the scenario changed setpoint_rad to 0.0 and the payload at t = 5 s" \
+        in graded["reason"]
+    assert "WEBSIM_SETPOINT_RAD_CHANGES tells the controller" in graded["reason"]
 
 
 def test_wall_clock_mode_reports_its_spread_within_the_tolerance(
@@ -104,7 +109,7 @@ def test_wrong_sign_fails_on_the_heading_step(tmp_path: Path) -> None:
     folder = submission(tmp_path / "dave", "heading_pid.py")
     out = tmp_path / "out"
     assert grade("heading_pid", folder, out, "env", "WEBSIM_KP=-4", "python3",
-                 "heading_pid.py") == 0
+                 "heading_pid.py") == 1
     graded = report(out, "heading_pid")
     assert graded["passed"] is False and graded["score"] == 0.0
     assert graded["reason"].startswith("heading_step: ")
@@ -138,7 +143,7 @@ def test_a_controller_that_never_connects_scores_zero_with_the_reason(tmp_path: 
     folder = submission(tmp_path / "frank", **{"hang.py": "import time\ntime.sleep(600)\n"})
     out = tmp_path / "out"
     assert grade("heading_pid", folder, out, "python3", "hang.py",
-                 options=("--startup-timeout", "3")) == 0
+                 options=("--startup-timeout", "3")) == 1
     graded = report(out, "heading_pid")
     assert graded["score"] == 0.0 and graded["passed"] is False
     assert graded["run"]["ended_by"] == "no_start"
@@ -161,7 +166,7 @@ def test_a_controller_that_stops_answering_scores_zero_with_the_reason(tmp_path:
             time.sleep(0.2)
         """})
     out = tmp_path / "out"
-    assert grade("heading_pid", folder, out, "python3", "mute.py") == 0
+    assert grade("heading_pid", folder, out, "python3", "mute.py") == 1
     graded = report(out, "heading_pid")
     assert graded["score"] == 0.0 and graded["run"]["ended_by"] == "no_answer"
     assert "did not answer /odom within 5 s 3 times" in graded["reason"]
@@ -169,15 +174,22 @@ def test_a_controller_that_stops_answering_scores_zero_with_the_reason(tmp_path:
     assert "answering nothing" in graded["controller"]["output_tail"]
 
 
-def test_a_crash_scores_zero_with_its_last_output(tmp_path: Path) -> None:
-    folder = submission(tmp_path / "heidi", **{"crash.py": "raise SystemExit('no idea')\n"})
+def test_a_crash_scores_zero_with_its_last_output(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The reason says why, where the instructor looks: the exception's last line in the
+    terminal and report.json; report.html shows no passing row for the run."""
+    folder = submission(tmp_path / "heidi", **{"crash.py": "import json\njson.loads('{')\n"})
     out = tmp_path / "out"
-    assert grade("heading_pid", folder, out, "python3", "crash.py") == 0
+    assert grade("heading_pid", folder, out, "python3", "crash.py") == 1
     graded = report(out, "heading_pid")
     assert graded["score"] == 0.0
     assert "the controller ended before the run did" in graded["reason"]
-    assert "exited with code 1" in graded["reason"]
-    assert "no idea" in graded["controller"]["output_tail"]
+    assert "exited with code 1: json.decoder.JSONDecodeError: Expecting property name" \
+        in graded["reason"]
+    assert "JSONDecodeError: Expecting property name" in capsys.readouterr().out
+    assert "json.loads('{')" in graded["controller"]["output_tail"]
+    page = (out / "heading_pid" / "report.html").read_text()
+    assert "<td>yes</td>" not in page and "not judged" in page
 
 
 def test_the_controller_cannot_reset_pause_or_fake_the_graded_run(tmp_path: Path) -> None:
@@ -216,7 +228,7 @@ def test_the_controller_cannot_reset_pause_or_fake_the_graded_run(tmp_path: Path
             time.sleep(0.2)
         """})
     out = tmp_path / "out"
-    assert grade("heading_pid", folder, out, "python3", "reset.py") == 0
+    assert grade("heading_pid", folder, out, "python3", "reset.py") == 1
     graded = report(out, "heading_pid")
     output = graded["controller"]["output_tail"]
     assert "/reset_simulation REFUSED" in output and "cannot be reset" in output
@@ -277,3 +289,22 @@ def test_the_slew_limited_heading_pid_passes_the_payload_bonus(tmp_path: Path) -
     assert graded["passed"] is True and graded["score"] == 1.0
     steps = graded["metrics"][0]["figures"]["steps"]
     assert len(steps) == 2 and all(step["settling_time_s"] < 3.0 for step in steps)
+
+
+def test_the_exit_status_follows_the_verdict_or_fail_under(tmp_path: Path) -> None:
+    """0 passed, 1 failed, 2 bad input; --fail-under moves the bar to a total."""
+    good = submission(tmp_path / "alice", "heading_pid.py")
+    assert grade("heading_pid", good, tmp_path / "a", "python3", "heading_pid.py",
+                 options=("--fail-under", "0.99")) == 0
+    wrong = submission(tmp_path / "dave", "heading_pid.py")
+    assert grade("heading_pid", wrong, tmp_path / "d", "env", "WEBSIM_KP=-4", "python3",
+                 "heading_pid.py", options=("--fail-under", "0")) == 0
+    assert grade("heading_pid", wrong, tmp_path / "d", "python3", "missing.py") == 1
+    assert grade("heading_pid", wrong, tmp_path / "d", "python3", "heading_pid.py",
+                 options=("--fail-under", "2")) == 2
+
+
+def test_output_modes_give_folders_x_where_files_have_r() -> None:
+    assert umask_for(0o600) == 0o077
+    assert umask_for(0o640) == 0o027
+    assert umask_for(0o644) == 0o022

@@ -136,7 +136,7 @@ def test_an_rclpy_node_whose_executor_blocks_is_stopped_with_the_reason(
     folder.mkdir()
     (folder / "probe.py").write_text(textwrap.dedent(SIM_TIME_PROBE))
     out = tmp_path / "out"
-    assert grade(folder, out, "python3", "probe.py") == 0
+    assert grade(folder, out, "python3", "probe.py") == 1  # it failed
     graded = report(out)
     assert graded["score"] == 0.0 and graded["passed"] is False
     assert graded["run"]["ended_by"] == "no_answer" and graded["run"]["step_on"] == "handshake"

@@ -111,10 +111,15 @@ def chunk(data: bytes, compression: str, declared: int, start_ns: int = 1_000,
 
 def replay_refuses(bag: Path, reason: str) -> None:
     """``websim replay BAG`` exits 2 with ``reason``, within ``MAX_RSS_MB`` of memory."""
-    script = ("import resource, sys\n"
+    # VmHWM, not getrusage's ru_maxrss: Linux keeps ru_maxrss across exec, so a child of a
+    # large pytest process (a whole suite's) would report the parent's peak
+    script = ("import re, sys\n"
+              "from pathlib import Path\n"
               "from websim.cli import main\n"
               f"code = main(['replay', {str(bag)!r}, '--ws-port', '0', '--http-port', '0'])\n"
-              "print('peak_rss_mb', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss >> 10)\n"
+              "status = Path('/proc/self/status').read_text()\n"
+              "kb = int(re.search(r'VmHWM:\\s+(\\d+)', status).group(1))\n"
+              "print('peak_rss_mb', kb >> 10)\n"
               "sys.exit(code)\n")
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                             timeout=120, check=False)

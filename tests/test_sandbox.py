@@ -8,6 +8,7 @@ import json
 import os
 import shutil
 import socket
+import subprocess
 import sys
 import tempfile
 import textwrap
@@ -32,6 +33,7 @@ from websim.sandbox.identity import FIRST_UID, UID_COUNT
 from websim.sandbox.limits import CPU_KILL_GRACE_S, MIB
 from websim.sandbox.mounts import controller_environment, visible_paths
 from websim.sandbox.outcome import Observed, size_text
+from websim.sandbox.submission import SubmissionRefusedError
 from websim.sandbox.watch import SAMPLE_PERIOD_S, usage
 
 HAVE_SANDBOX = shutil.which("bwrap") is not None and os.geteuid() == 0
@@ -419,11 +421,19 @@ def test_processes_over_the_memory_limit_together_are_stopped(tmp_path: Path) ->
         block = b"\\1" * (100 * 1024 * 1024)
         time.sleep(3600)
     """)
-    result = run(folder, SandboxLimits(memory_bytes=256 * MIB, wall_time_s=GENEROUS_WALL_S))
-    assert result.ended_by == "memory"
-    assert result.peak_memory_bytes is not None and result.peak_memory_bytes > 256 * MIB
-    assert result.reason.startswith("stopped: its processes held ")
-    assert "over the memory limit (256 MiB)" in result.reason
+    with SubmissionSandbox(folder, limits=SandboxLimits(memory_bytes=256 * MIB,
+                                                        wall_time_s=GENEROUS_WALL_S)) as box:
+        result = box.run_controller(["python3", "main.py"])
+        counted_by_cgroup = box._cgroup is not None
+    assert result.ended_by == "memory" and result.peak_memory_bytes is not None
+    if counted_by_cgroup:  # the kernel holds the limit: it kills one, the sandbox the rest
+        assert result.oom_killed and result.peak_memory_bytes > 100 * MIB
+        assert result.reason.startswith("stopped: its processes needed more than the memory "
+                                        "limit (256 MiB) together")
+    else:
+        assert result.peak_memory_bytes > 256 * MIB
+        assert result.reason.startswith("stopped: its processes held ")
+        assert "over the memory limit (256 MiB)" in result.reason
 
 
 @needs_sandbox
@@ -505,9 +515,9 @@ def test_what_a_controller_writes_is_bounded_in_all(tmp_path: Path) -> None:
     assert result.limits_hit == ("disk",)
     assert "the disk limit (4 MiB for its home, 64 MiB for /tmp)" in result.reason
     (folder / "data.bin").write_bytes(b"x" * 5 * MIB)
-    result = run(folder, limits)
-    assert result.exit_code == 1 and "cp: " in result.output_tail
-    assert result.limits_hit == ("disk",)
+    with pytest.raises(SubmissionRefusedError, match=r"the submission is more than 5 MiB .*"
+                       r"more than the 2 MiB a submission may be"):
+        run(folder, limits)  # refused before anything is copied: half the home at most
 
 
 # --- without bubblewrap -----------------------------------------------------------------
@@ -614,3 +624,225 @@ def test_limits_refuse_nonsense() -> None:
         SandboxLimits(processes=0)
     with pytest.raises(ValueError, match="open_files must be at least 16"):
         SandboxLimits(open_files=3)
+
+
+# --- the kernel: namespaces, system calls, socket buffers ---------------------------------
+
+ESCAPES = """
+    import ctypes, errno, json, os, socket, subprocess
+    libc = ctypes.CDLL(None, use_errno=True)
+    report = {}
+    def errno_of(call, *args):
+        result = call(*args)
+        return 0 if result >= 0 else errno.errorcode[ctypes.get_errno()]
+    report["unshare_command"] = subprocess.run(
+        ["unshare", "--user", "--map-root-user", "id"], capture_output=True,
+        text=True).returncode
+    report["unshare_user"] = errno_of(libc.unshare, 0x10000000)
+    report["unshare_net"] = errno_of(libc.unshare, 0x40000000)
+    report["mount"] = errno_of(libc.mount, b"none", b"/tmp", b"tmpfs", 0, None)
+    report["ptrace"] = errno_of(libc.ptrace, 16, 1, None, None)  # PTRACE_ATTACH to pid 1
+    report["bpf"] = errno_of(libc.syscall, 321, 0, None, 0)
+    report["io_uring_setup"] = errno_of(libc.syscall, 425, 8, None)
+    report["keyctl"] = errno_of(libc.syscall, 250, 0, 0, 0, 0, 0)
+    for name, family, kind in (("packet", 17, socket.SOCK_RAW),
+                               ("bluetooth", 31, socket.SOCK_STREAM),
+                               ("alg", 38, socket.SOCK_SEQPACKET)):
+        try:
+            socket.socket(family, kind).close()
+            report[name] = 0
+        except OSError as error:
+            report[name] = errno.errorcode[error.errno]
+    ordinary = socket.socket(); ordinary.close()
+    a, b = socket.socketpair(); a.close(); b.close()
+    child = os.fork()
+    if child == 0:
+        os._exit(7)
+    report["fork"] = os.waitstatus_to_exitcode(os.waitpid(child, 0)[1])
+    import threading
+    thread = threading.Thread(target=lambda: None); thread.start(); thread.join()
+    report["thread"] = "ran"
+    report["seccomp"] = open("/proc/self/status").read().split("Seccomp:")[1].split()[0]
+    print(json.dumps(report), flush=True)
+"""
+
+
+@needs_sandbox
+def test_no_namespace_mount_or_kernel_facility_is_reachable_inside(tmp_path: Path) -> None:
+    """``unshare --user --map-root-user`` worked inside before (every capability in a new
+    namespace): refused now, as are mounts, ptrace, bpf, io_uring, keyrings and exotic
+    sockets; forks, threads and ordinary sockets work."""
+    folder = submission(tmp_path / "mallory", ESCAPES)
+    result = run(folder, SandboxLimits(wall_time_s=GENEROUS_WALL_S))
+    assert result.exit_code == 0, result.output_tail
+    report = last_json(result)
+    assert report["unshare_command"] != 0
+    for name in ("unshare_user", "unshare_net", "mount", "ptrace", "bpf", "io_uring_setup",
+                 "keyctl"):
+        assert report[name] == "EPERM", (name, report[name])
+    for name in ("packet", "bluetooth", "alg"):
+        assert report[name] == "EAFNOSUPPORT", (name, report[name])
+    assert report["fork"] == 7 and report["thread"] == "ran"
+    assert report["seccomp"] == "2"  # a filter is in force
+    assert "system-call filter (seccomp)" in result.isolation
+
+
+SOCKET_HOG = """
+    import socket, sys, time
+    kind = sys.argv[1]
+    server = socket.socket(); server.bind(("127.0.0.1", 0)); server.listen(512)
+    held, queued = [], 0
+    try:
+        for _ in range(400):
+            if kind == "unix":
+                a, b = socket.socketpair()
+            else:
+                a = socket.create_connection(server.getsockname()); b, _ = server.accept()
+            for sock in (a, b):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 24)
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 24)
+            a.setblocking(False)
+            try:
+                while True:
+                    queued += a.send(b"x" * 65536)
+            except OSError:
+                pass
+            held += [a, b]
+            print("queued", queued, flush=True)
+    except OSError as error:
+        print("refused", error, flush=True)
+    time.sleep(3600)
+"""
+
+
+@needs_sandbox
+@pytest.mark.parametrize("kind", ["unix", "tcp"])
+def test_socket_buffers_count_against_the_memory_limit(tmp_path: Path, kind: str) -> None:
+    """Sockets that are written and never read held 753 MiB against a 256 MiB limit,
+    unseen. Now the kernel's count (the cgroup's: local sockets with the rest of its kernel
+    memory, which ends the run; TCP's buffers under a quarter of the limit, where sends
+    block) or the sampled socket queues stop it: what it queued stays within the limit."""
+    folder = submission(tmp_path / "hog", SOCKET_HOG)
+    limits = SandboxLimits(memory_bytes=256 * MIB, wall_time_s=30.0)
+    with SubmissionSandbox(folder, limits=limits) as box:
+        result = box.run_controller(["python3", "main.py", kind])
+    lines = [line for line in result.output_tail.splitlines() if line.startswith("queued")]
+    queued = int(lines[-1].split()[1]) if lines else 0
+    assert 0 < queued < 256 * MIB + 16 * MIB, (queued, result.reason)
+    if kind == "unix":  # counted with its memory: the run ends at the limit (the sandbox
+        # stops it, or the kernel kills it first at its cgroup's limit)
+        assert result.ended_by == "memory" or (
+            result.signal == "SIGKILL" and "memory" in result.limits_hit), result.reason
+
+
+def test_the_system_call_filter_builds_here() -> None:
+    """The BPF program bubblewrap loads (pyseccomp and libseccomp are installed)."""
+    from websim.sandbox.syscalls import seccomp_program
+    program = seccomp_program()
+    assert len(program) % 8 == 0 and len(program) > 200  # BPF instructions are 8 bytes
+
+
+# --- unprivileged: a grader that is not root ---------------------------------------------
+
+UNPRIVILEGED_UID = 64999
+"""The user the unprivileged tests run the grader as (setpriv; no account needed)."""
+
+UNPRIVILEGED_GRADER = """
+import json, os, sys, tempfile, textwrap
+from pathlib import Path
+from websim.sandbox import SandboxLimits, SubmissionSandbox
+folder = Path(sys.argv[1])
+with SubmissionSandbox(folder, limits=SandboxLimits(processes=64, wall_time_s=120)) as box:
+    server_argv = [sys.executable, "-m", "websim.cli", "serve", "--ws-port", "9090",
+                   "--http-port", "8080", "--world", "empty"]
+    box.start_server(server_argv, env={**os.environ, "PYTHONUNBUFFERED": "1",
+                                       "XDG_DATA_HOME": tempfile.mkdtemp()})
+    result = box.run_controller(["python3", "main.py"])
+    box.stop_server()
+print(json.dumps({"reason": result.reason, "uid": box.uid, "tail": result.output_tail,
+                  "isolation": result.isolation, "peak_tasks": result.peak_tasks}))
+"""
+
+UNPRIVILEGED_CONTROLLER = """
+    import json, os, subprocess, time, urllib.request
+    report = {"uid": os.getuid()}
+    with urllib.request.urlopen("http://127.0.0.1:8080/healthz", timeout=30) as answer:
+        report["world"] = json.load(answer)["world"]
+    report["unshare"] = subprocess.run(["unshare", "--user", "--map-root-user", "id"],
+                                       capture_output=True).returncode
+    children = []
+    try:
+        for _ in range(200):
+            pid = os.fork()
+            if pid == 0:
+                time.sleep(30)
+                os._exit(0)
+            children.append(pid)
+    except OSError as error:
+        report["fork_refused_after"] = len(children)
+    for pid in children:
+        os.kill(pid, 9)
+    print(json.dumps(report), flush=True)
+"""
+
+
+@needs_sandbox
+def test_a_grader_that_is_not_root_sandboxes_with_user_namespaces(tmp_path: Path) -> None:
+    """A student grading on a laptop: the grader as an ordinary user (setpriv to a uid of
+    no account). bubblewrap runs unprivileged in a user namespace of its own; the controller
+    reaches its simulator, cannot make a user namespace, and its process limit counts its
+    own processes (the kernel counts them per user namespace)."""
+    work = Path(tempfile.mkdtemp(prefix="websim-unprivileged-"))
+    try:
+        folder = submission(work / "alice", UNPRIVILEGED_CONTROLLER)
+        script = work / "grade.py"
+        script.write_text(UNPRIVILEGED_GRADER)
+        for path in (work, folder, folder / "main.py", script):
+            os.chown(path, UNPRIVILEGED_UID, UNPRIVILEGED_UID)
+        python = unprivileged_python(work)
+        env = {"PATH": os.environ["PATH"], "HOME": str(work), "LANG": "C.UTF-8",
+               "TMPDIR": str(work)}
+        done = subprocess.run(
+            ["setpriv", f"--reuid={UNPRIVILEGED_UID}", f"--regid={UNPRIVILEGED_UID}",
+             "--clear-groups", "--", python, str(script), str(folder)],
+            env=env, cwd=work, capture_output=True, text=True, timeout=300, check=False)
+        assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
+        outcome = json.loads(done.stdout.strip().splitlines()[-1])
+        assert outcome["uid"] == UNPRIVILEGED_UID
+        assert "in a user namespace of its own" in outcome["isolation"]
+        report = json.loads([line for line in outcome["tail"].splitlines()
+                             if line.startswith("{")][-1])
+        assert report["uid"] == UNPRIVILEGED_UID and report["world"] == "empty arena"
+        assert report["unshare"] != 0
+        assert 0 < report.get("fork_refused_after", 999) < 64, report
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def unprivileged_python(work: Path) -> str:
+    """A Python the unprivileged user can run with websim and its dependencies importable.
+
+    This interpreter may live where that user cannot go (pyenv under /root): then a venv of
+    the system's Python 3 of the same version, with this environment's packages and this
+    checkout added (a .pth file; they are readable by all).
+    """
+    here = Path(sys.executable).resolve()
+    if all(os.access(parent, os.X_OK, effective_ids=False) and parent.stat().st_mode & 0o001
+           for parent in here.parents):
+        return sys.executable
+    system = shutil.which("python3", path="/usr/bin")
+    version = f"{sys.version_info.major}.{sys.version_info.minor}"
+    probe = subprocess.run([system or "false", "-c", "import sys; print(sys.version[:4])"],
+                           capture_output=True, text=True, check=False)
+    if system is None or not probe.stdout.startswith(version):
+        pytest.skip(f"this Python ({here}) is not readable by other users and there is no "
+                    f"system python{version} to stand in for it")
+    venv = work / "venv"
+    subprocess.run([system, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
+    site_packages = next(path for path in sys.path if path.endswith("site-packages"))
+    purelib = next(venv.glob("lib/python*/site-packages"))
+    (purelib / "websim-test.pth").write_text(
+        f"import site; site.addsitedir({site_packages!r})\n{Path(__file__).parent.parent}\n")
+    for path in [venv, *venv.rglob("*")]:
+        os.lchown(path, UNPRIVILEGED_UID, UNPRIVILEGED_UID)
+    return str(venv / "bin" / "python")

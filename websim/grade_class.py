@@ -29,11 +29,12 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, NamedTuple
 
-import yaml
-
 from grading import Suite
+from grading.results import figure
 from physics import ConfigError
+from physics.validation import load_yaml_file
 from websim.grade_run import GradeOptions, grade_submission
+from websim.sandbox.submission import SubmissionRefusedError, open_own_file
 
 SUBMISSION_FILE = "websim-submission.yaml"
 SUBMISSION_KEYS = ("command", "ros", "ros_parameters")
@@ -73,95 +74,148 @@ def submission_command(folder: Path) -> list[str]:
 def submission_declaration(folder: Path) -> Declared:
     """The command (and ``ros``) a submission declares in its ``websim-submission.yaml``.
 
+    The file is read as the student's and nothing else: a regular file of the folder itself,
+    never through a symbolic link (``websim.sandbox.submission.open_own_file``), at most
+    ``MAX_SUBMISSION_FILE_BYTES``, parsed by the project's bounded YAML loader; the errors
+    quote nothing but the file's own lines and its keys' names.
+
     Raises:
-        ConfigError: the file is missing or not ``command: ...`` with an optional
-            ``ros: true|false`` (the message says which).
+        ConfigError: the file is missing, a link, too large, not YAML, or not
+            ``command: ...`` with an optional ``ros: true|false`` (the message says which).
     """
-    path = folder / SUBMISSION_FILE
-    if not path.is_file():
-        raise ConfigError(f"{path.name}: missing: a submission declares its command there "
-                          f"(command: python3 controller.py)")
-    if path.stat().st_size > MAX_SUBMISSION_FILE_BYTES:
-        raise ConfigError(f"{path.name}: larger than {MAX_SUBMISSION_FILE_BYTES} bytes")
     try:
-        document = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as error:
-        raise ConfigError(f"{path.name}: not YAML: {error}") from None
-    if not isinstance(document, dict) or set(document) - set(SUBMISSION_KEYS):
-        raise ConfigError(f"{path.name}: expected only 'command: ...' (and 'ros: true' for an "
-                          f"rclpy node), got {document!r:.80}")
+        with open_own_file(folder, SUBMISSION_FILE, MAX_SUBMISSION_FILE_BYTES) as fd:
+            if fd is None:
+                raise ConfigError(f"{SUBMISSION_FILE}: missing: a submission declares its "
+                                  "command there (command: python3 controller.py)")
+            opened = f"/proc/self/fd/{fd}"
+            try:
+                document = load_yaml_file(opened, "submission", MAX_SUBMISSION_FILE_BYTES)
+            except ConfigError as error:
+                raise ConfigError(str(error).replace(opened, SUBMISSION_FILE)) from None
+            except RecursionError:
+                raise ConfigError(f"{SUBMISSION_FILE}: nested too deep") from None
+    except SubmissionRefusedError as error:
+        raise ConfigError(f"{SUBMISSION_FILE}: {error}") from None
+    if not isinstance(document, dict):
+        raise ConfigError(f"{SUBMISSION_FILE}: expected 'command: ...' (and 'ros: true' for an "
+                          f"rclpy node), got {_kind(document)}")
+    unknown = [key for key in document if key not in SUBMISSION_KEYS]
+    if unknown:
+        names = ", ".join(_quoted(key) for key in unknown[:5])
+        raise ConfigError(f"{SUBMISSION_FILE}: unknown key(s) {names}: expected only "
+                          f"{', '.join(SUBMISSION_KEYS)}")
     ros = document.get("ros", False)
     if not isinstance(ros, bool):
-        raise ConfigError(f"{path.name}: ros: expected true or false, got {ros!r:.40}")
+        raise ConfigError(f"{SUBMISSION_FILE}: ros: expected true or false, got {_kind(ros)}")
     command = document.get("command")
     if isinstance(command, str):
         try:
             command = shlex.split(command)
         except ValueError as error:
-            raise ConfigError(f"{path.name}: command: {error}") from None
+            raise ConfigError(f"{SUBMISSION_FILE}: command: {error}") from None
     if (not isinstance(command, list) or not command or len(command) > MAX_COMMAND_ARGS
-            or not all(isinstance(arg, str) and arg for arg in command)):
-        raise ConfigError(f"{path.name}: command: expected a command line or a list of "
-                          f"words, got {command!r:.80}")
-    return Declared(command, ros, _ros_parameters(path.name, document, ros))
+            or not all(isinstance(arg, str) and arg and len(arg) <= MAX_ARG_CHARS
+                       for arg in command)):
+        raise ConfigError(f"{SUBMISSION_FILE}: command: expected a command line or a list of "
+                          f"at most {MAX_COMMAND_ARGS} words, got {_kind(command)}")
+    return Declared(command, ros, _ros_parameters(document, ros))
 
 
-def _ros_parameters(name: str, document: dict[str, Any],
-                    ros: bool) -> tuple[tuple[str, str], ...]:
+def _ros_parameters(document: dict[str, Any], ros: bool) -> tuple[tuple[str, str], ...]:
     """``ros_parameters: {kp: WEBSIM_KP}``, checked: ROS names to scenario variables."""
     mapping = document.get("ros_parameters")
     if mapping is None:
         return ()
+    where = f"{SUBMISSION_FILE}: ros_parameters"
     if not ros:
-        raise ConfigError(f"{name}: ros_parameters: needs 'ros: true' (an rclpy node)")
+        raise ConfigError(f"{where}: needs 'ros: true' (an rclpy node)")
     if not isinstance(mapping, dict) or len(mapping) > MAX_ROS_PARAMETERS:
-        raise ConfigError(f"{name}: ros_parameters: expected at most {MAX_ROS_PARAMETERS} "
-                          f"'parameter: WEBSIM_NAME' entries, got {mapping!r:.80}")
+        raise ConfigError(f"{where}: expected at most {MAX_ROS_PARAMETERS} "
+                          f"'parameter: WEBSIM_NAME' entries, got {_kind(mapping)}")
     pairs = []
     for parameter, variable in mapping.items():
         if not isinstance(parameter, str) or not ROS_PARAMETER_NAME.match(parameter):
-            raise ConfigError(f"{name}: ros_parameters: {parameter!r:.40} is not a ROS "
-                              "parameter name")
+            raise ConfigError(f"{where}: {_quoted(parameter)} is not a ROS parameter name")
         if not isinstance(variable, str) or not SCENARIO_VARIABLE.match(variable):
-            raise ConfigError(f"{name}: ros_parameters: {parameter}: expected a scenario's "
-                              f"variable (WEBSIM_NAME, e.g. WEBSIM_KP), got {variable!r:.40}")
+            raise ConfigError(f"{where}: {parameter}: expected a scenario's variable "
+                              f"(WEBSIM_NAME, e.g. WEBSIM_KP), got {_kind(variable)}")
         pairs.append((parameter, variable))
     return tuple(pairs)
 
 
+MAX_ARG_CHARS = 4096
+
+
+def _kind(value: object) -> str:
+    """A value of a submission file, named not quoted (an alias bomb's repr never ends)."""
+    if value is None:
+        return "nothing"
+    if isinstance(value, (list, dict, str)):
+        return f"a {type(value).__name__} of {len(value)}"
+    return f"a {type(value).__name__}"
+
+
+def _quoted(key: object) -> str:
+    text = key if isinstance(key, str) else _kind(key)
+    return repr(text[:40] + ("..." if len(text) > 40 else ""))
+
+
 def grade_class(suite_file: str | Path, suite: Suite, submissions: Path, out: Path,
                 options: GradeOptions, jobs: int | None = None) -> list[dict[str, Any]]:
-    """Grade every submission; write grades.csv and class.html; the rows, by student."""
+    """Grade every submission; write grades.csv and class.html; the rows, by student.
+
+    One student's submission (a bad file, a link, a crash) is that student's zero with the
+    reason, never the class's: grades.csv and class.html are written for everyone.
+    """
     students = sorted(path for path in submissions.iterdir()
-                      if path.is_dir() and not path.name.startswith("."))
+                      if (path.is_dir() or path.is_symlink()) and not path.name.startswith("."))
     if not students:
         raise ConfigError(f"--submissions {submissions}: no submission folders in it")
     out.mkdir(parents=True, exist_ok=True)
     workers = max(1, jobs or os.cpu_count() or 1)
 
     def one(folder: Path) -> dict[str, Any]:
+        try:
+            return grade_student(folder)
+        except Exception as error:  # a grader fault for one student must not stop the class
+            return _zero_row(folder.name, suite, f"the grader failed: {_last_line(error)}")
+
+    def grade_student(folder: Path) -> dict[str, Any]:
+        if folder.is_symlink():
+            return _zero_row(folder.name, suite, "the submission folder is a symbolic link: "
+                                                 "not graded")
         target = out / folder.name
         try:
             declared = submission_declaration(folder)
         except ConfigError as error:
             return _zero_row(folder.name, suite, str(error))
-        command = declared.command
         graded = dataclasses.replace(options, ros=options.ros or declared.ros,
                                      ros_parameters=declared.ros_parameters)
-        try:
-            summary = grade_submission(suite_file, command, folder, target, graded, quiet=True)
-        except Exception as error:  # a grader fault for one student must not stop the class
-            return _zero_row(folder.name, suite, f"the grader failed: {error}")
+        summary = grade_submission(suite_file, declared.command, folder, target, graded,
+                                   quiet=True)
         failing = [row for row in summary["scenarios"] if not row["passed"]]
         reason = (f"{failing[0]['name']}: {failing[0]['reason']}" if failing else "passed")
         return {"student": folder.name, "total": summary["total"], "reason": reason,
                 "scenarios": {row["name"]: row for row in summary["scenarios"]}}
 
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        rows = list(pool.map(one, students))
-    write_csv(out / "grades.csv", suite, rows)
-    write_html(out / "class.html", suite, rows)
+    rows: list[dict[str, Any]] = []
+    try:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            rows = list(pool.map(one, students))
+    finally:
+        done = {row["student"] for row in rows}
+        rows += [_zero_row(folder.name, suite, "not graded: grading was interrupted")
+                 for folder in students if folder.name not in done]
+        write_csv(out / "grades.csv", suite, rows)
+        write_html(out / "class.html", suite, rows)
     return rows
+
+
+def _last_line(error: BaseException) -> str:
+    """An exception's type and the last line of its message."""
+    lines = str(error).strip().splitlines()
+    return f"{type(error).__name__}: {lines[-1] if lines else ''}"[:300]
 
 
 def _zero_row(student: str, suite: Suite, reason: str) -> dict[str, Any]:
@@ -248,36 +302,60 @@ def _report_link(out: Path, student: str, report: str | None) -> str | None:
 
 
 def gradescope_results(summary: dict[str, Any], suite: Suite, out: Path,
-                       total_points: float = 100.0) -> dict[str, Any]:
+                       total_points: float = 100.0, *,
+                       execution_time_s: float | None = None) -> dict[str, Any]:
     """Gradescope's results.json of one graded submission (its autograder specification).
 
-    One test per scenario, ``max_score`` its share of ``total_points`` by weight; its
-    ``output`` the reason, the run's figures and the controller's last output.
+    One test per scenario, ``max_score`` its share of ``total_points`` by weight, its
+    ``visibility`` the suite entry's; its ``output`` (Markdown) the reason, each metric's
+    figures, the controller's end and last output. ``leaderboard``: each passed scenario's
+    first timed metric (time to goal, settling time), lower first. ``extra_data.receipt``:
+    the hashes of the submission and the suite, and the seeds (re-run exactly).
     """
     weights = sum(entry.weight for entry in suite.entries)
-    tests = []
+    visibility = {entry.scenario.name: entry.visibility for entry in suite.entries}
+    tests: list[dict[str, Any]] = []
+    leaderboard: list[dict[str, Any]] = []
     for row in summary["scenarios"]:
         points = total_points * row["weight"] / weights
         report_path = out / row["report"]
         report = json.loads(report_path.read_text()) if report_path.is_file() else {}
-        lines = [f"{row['name']}: score {row['score']:.4f}: {row['reason']}"]
+        lines = [f"**{row['name']}**: score {row['score']:.4f}, "
+                 f"{'passed' if row['passed'] else 'failed'}: {row['reason']}", ""]
+        timed = False
         for metric in report.get("metrics", []):
-            lines.append(f"  {metric['name']}: value {metric['value']} {metric['unit']}, "
-                         f"score {metric['score']:.4f}, {metric['reason']}")
+            lines.append(f"- {metric['name']}: {figure(metric['value'], metric['unit'])} "
+                         f"(limit {figure(metric.get('threshold'), metric['unit'])}), score "
+                         f"{metric['score']:.4f}: {metric['reason']}")
+            if (row["passed"] and not timed and metric["unit"] == "s"
+                    and metric["value"] is not None):
+                timed = True
+                leaderboard.append({"name": f"{row['name']}: {metric['name']} (s)",
+                                    "value": round(float(metric["value"]), 3),
+                                    "order": "asc"})
         controller = report.get("controller") or {}
         if controller:
-            lines.append(f"controller: {controller.get('reason', '')}")
+            lines += ["", f"controller: {controller.get('reason', '')}"]
             tail = controller.get("output_tail", "")[-2000:]
             if tail:
-                lines.append("its last output:\n" + tail)
+                fenced = tail.replace("```", "` ` `")
+                lines += ["", "its last output:", "", "```", fenced, "```"]
         tests.append({"name": row["name"], "score": round(points * row["score"], 4),
                       "max_score": round(points, 4),
                       "status": "passed" if row["passed"] else "failed",
-                      "output": "\n".join(lines)})
-    return {"score": round(total_points * summary["total"], 4), "tests": tests,
-            "output": f"websim grade, {summary['mode']} mode: {summary['suite']} total "
-                      f"{summary['total']:.4f}",
-            "visibility": "visible", "stdout_visibility": "visible"}
+                      "visibility": visibility.get(row["name"], "visible"),
+                      "output": "\n".join(lines), "output_format": "md"})
+    results: dict[str, Any] = {
+        "score": round(total_points * summary["total"], 4), "tests": tests,
+        "output": f"websim grade, {summary['mode']} mode: {summary['suite']} total "
+                  f"{summary['total']:.4f}",
+        "output_format": "md", "visibility": "visible", "stdout_visibility": "visible",
+        "extra_data": {"receipt": summary.get("receipt", {})}}
+    if leaderboard:
+        results["leaderboard"] = leaderboard
+    if execution_time_s is not None:
+        results["execution_time"] = round(execution_time_s)
+    return results
 
 
 def gradescope_refusal(suite: Suite, reason: str, total_points: float = 100.0
@@ -286,15 +364,19 @@ def gradescope_refusal(suite: Suite, reason: str, total_points: float = 100.0
     weights = sum(entry.weight for entry in suite.entries)
     tests = [{"name": entry.scenario.name, "score": 0.0,
               "max_score": round(total_points * entry.weight / weights, 4),
-              "status": "failed", "output": f"not run: {reason}"} for entry in suite.entries]
+              "status": "failed", "visibility": entry.visibility,
+              "output": f"not run: {reason}", "output_format": "text"}
+             for entry in suite.entries]
     return {"score": 0.0, "tests": tests, "output": f"websim grade: not graded: {reason}",
-            "visibility": "visible", "stdout_visibility": "visible"}
+            "output_format": "text", "visibility": "visible", "stdout_visibility": "visible"}
 
 
 def write_gradescope(path: Path, results: dict[str, Any]) -> None:
-    """Write results.json (its folder made if needed)."""
+    """Write results.json (its folder made if needed; atomically: all of it or none)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(results, indent=2))
+    temporary = path.with_name(f".{path.name}.tmp")
+    temporary.write_text(json.dumps(results, indent=2))
+    temporary.replace(path)
 
 
 __all__ = ["SUBMISSION_FILE", "grade_class", "gradescope_refusal", "gradescope_results",

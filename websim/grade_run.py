@@ -20,9 +20,14 @@ the runs ran, whatever their scores, 2 for bad input.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import importlib.metadata
+import importlib.util
 import json
 import os
 import random
+import re
 import statistics
 import sys
 import time
@@ -31,8 +36,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from grading import Scenario, controller_environment, evaluate, load_suite
-from grading.recorded import bag_folder, trajectory_from_bag
+from grading import Scenario, Suite, controller_environment, evaluate, load_suite
+from grading.recorded import (
+    TRUTH_FILE,
+    IncompleteRecordError,
+    bag_folder,
+    trajectory_from_truth,
+)
 from grading.report_page import report_html
 from grading.scenario import resolve_scenario_path
 from grading.trajectory import Sample, until
@@ -46,7 +56,13 @@ from websim.grade_server import (
     STEP_TIMEOUT_S,
     on_robot,
 )
-from websim.sandbox import SandboxLimits, SimulatorStartError, SubmissionSandbox
+from websim.sandbox import (
+    SandboxLimits,
+    SimulatorStartError,
+    SubmissionRefusedError,
+    SubmissionSandbox,
+)
+from websim.sandbox.submission import submission_digest
 
 REPORT_FILE = "report.json"
 PAGE_FILE = "report.html"
@@ -90,6 +106,8 @@ class GradeOptions:
         ros_parameters: (ROS parameter, scenario variable) pairs: with ``ros``, the node
             gets ``-p NAME:=VALUE`` after ``ROS_ARGS``, the variable's value in each scenario
             (``websim-submission.yaml``'s ``ros_parameters``).
+        node_modules: folders of Node modules a controller may ``require`` (roslib for Node:
+            ``NODE_PATH``); default ``node_modules_found()``.
     """
 
     mode: str = "deterministic"
@@ -100,6 +118,7 @@ class GradeOptions:
     ros: bool = False
     params: str | None = None
     ros_parameters: tuple[tuple[str, str], ...] = ()
+    node_modules: tuple[str, ...] | None = None
 
 
 def ros_arguments(scenario: Scenario, options: GradeOptions) -> list[str]:
@@ -117,6 +136,52 @@ def ros_arguments(scenario: Scenario, options: GradeOptions) -> list[str]:
                               f"scenario {scenario.name} (it sets: {known})")
         arguments += ["-p", f"{parameter}:={told[variable]}"]
     return arguments
+
+
+CHECKOUT_NODE_MODULES = Path(__file__).resolve().parent.parent / "web-interface" / "node_modules"
+"""roslib for Node in a checkout of websim (``npm ci`` in web-interface/): a wheel ships only
+the browser's build of it."""
+
+
+def node_modules_found() -> tuple[str, ...]:
+    """The folders of Node modules a controller gets when none are given: the checkout's."""
+    if (CHECKOUT_NODE_MODULES / "roslib" / "package.json").is_file():
+        return (str(CHECKOUT_NODE_MODULES),)
+    return ()
+
+
+def python_runtime_paths() -> tuple[str, ...]:
+    """Folders a controller must see for websim's Python to import roslibpy.
+
+    Raises:
+        RuntimeError: websim's Python has no roslibpy (the message says how to get it).
+    """
+    spec = importlib.util.find_spec("roslibpy")
+    if spec is None or spec.origin is None:
+        raise RuntimeError(f"websim's Python ({sys.executable}) has no roslibpy, which a "
+                           "graded controller is promised: pip install roslibpy into it "
+                           "(it is a dependency of websim: reinstall websim)")
+    return (str(Path(spec.origin).resolve().parent.parent),)
+
+
+def check_runtime(commands: Sequence[Sequence[str]], options: GradeOptions) -> None:
+    """Check, before grading, that the runtime the controllers are promised is here.
+
+    Python with roslibpy always; roslib for Node when a command runs ``node``.
+
+    Raises:
+        RuntimeError: what is missing, and how to get it.
+    """
+    python_runtime_paths()
+    uses_node = any(command and os.path.basename(command[0]) in ("node", "nodejs")
+                    for command in commands)
+    modules = options.node_modules if options.node_modules is not None \
+        else node_modules_found()
+    if uses_node and not any((Path(folder) / "roslib").is_dir() for folder in modules):
+        raise RuntimeError(
+            "a controller runs node, but this websim has no roslib for Node (a wheel ships "
+            "only the browser's): npm install roslib@1.4.1 into a folder and give its "
+            "node_modules with --node-modules DIR")
 
 
 def ros_environment(sandboxed: bool) -> dict[str, str]:
@@ -155,9 +220,37 @@ def grade_submission(suite_file: str | Path, command: Sequence[str], submission:
                      "report": str(Path(entry.scenario.name) / REPORT_FILE)})
     total = sum(row["weight"] * row["score"] for row in rows) / sum(row["weight"] for row in rows)
     summary = {"suite": suite.name, "total": min(1.0, total), "mode": options.mode,
-               "scenarios": rows}
+               "scenarios": rows, "receipt": receipt(suite_path, suite, submission, options)}
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
+
+
+def receipt(suite_path: Path, suite: Suite, submission: Path,
+            options: GradeOptions) -> dict[str, Any]:
+    """What makes a grade re-runnable exactly: hashes of the submission and the suite, seeds.
+
+    The submission's hash is of what the controller got (``submission_digest``: the ignored
+    names left out); the suite's, of its file and every scenario file it names.
+    """
+    try:
+        submission_sha256: str | None = submission_digest(
+            submission, SandboxLimits().home_bytes // 2)
+    except SubmissionRefusedError:
+        submission_sha256 = None
+    suite_files = dict.fromkeys([suite_path, *(Path(entry.scenario.source) for entry in
+                                               suite.entries)])
+    digest = hashlib.sha256()
+    for path in suite_files:
+        if path.is_file():
+            digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    try:
+        version = importlib.metadata.version("websim")
+    except importlib.metadata.PackageNotFoundError:
+        version = "unknown"
+    return {"submission_sha256": submission_sha256, "suite_sha256": digest.hexdigest(),
+            "seeds": {entry.scenario.name: entry.scenario.seed for entry in suite.entries},
+            "mode": options.mode, "step_on": options.step_on, "runs": options.runs,
+            "ros": options.ros, "websim": version}
 
 
 def grade_scenario(suite_path: Path, scenario: Scenario, command: Sequence[str],
@@ -177,7 +270,7 @@ def grade_scenario(suite_path: Path, scenario: Scenario, command: Sequence[str],
                             "report": str(Path(f"run-{k + 1}") / REPORT_FILE)}
                            for k, r in enumerate(runs)],
                   "spread": {"scores": scores, "median": median,
-                             "range": max(scores) - min(scores),
+                             "range": round(max(scores) - min(scores), 9),
                              "stdev": statistics.pstdev(scores),
                              "metric_values": _metric_spread(runs)}}
         (out / REPORT_FILE).write_text(json.dumps(report, indent=2))
@@ -188,7 +281,7 @@ def grade_run(suite_path: Path, scenario: Scenario, command: Sequence[str],
               submission: Path, out: Path, options: GradeOptions) -> dict[str, Any]:
     """One run of one scenario: sandbox, simulator, controller, score; writes report.json."""
     out.mkdir(parents=True, exist_ok=True)
-    for stale in (out / RUN_FILE, out / REPORT_FILE):
+    for stale in (out / RUN_FILE, out / REPORT_FILE, out / TRUTH_FILE):
         stale.unlink(missing_ok=True)
     recording_dir = out / RECORDING_DIR
     if recording_dir.exists():
@@ -199,8 +292,17 @@ def grade_run(suite_path: Path, scenario: Scenario, command: Sequence[str],
                 bag.rmdir()
     limits = SandboxLimits(wall_time_s=wall_time_limit_s(scenario, options))
     started = time.monotonic()
-    with SubmissionSandbox(submission, limits=limits, no_sandbox=not options.sandboxed,
-                           hidden_paths=[out.resolve()]) as sandbox:
+    node_modules = options.node_modules if options.node_modules is not None \
+        else node_modules_found()
+    with contextlib.ExitStack() as stack:
+        try:
+            sandbox = stack.enter_context(SubmissionSandbox(
+                submission, limits=limits, no_sandbox=not options.sandboxed,
+                hidden_paths=[out.resolve()], visible_paths=python_runtime_paths(),
+                node_path=node_modules))
+        except SubmissionRefusedError as error:
+            return _write(out, {"scenario": scenario.name, "mode": options.mode, "run": None,
+                                "controller": None, **_zero(f"not run: {error}")})
         argv = [sys.executable, "-m", "websim.grade_server", str(suite_path),
                 "--scenario", scenario.name, "--out", str(out.resolve()),
                 "--mode", options.mode, "--step-on", options.step_on,
@@ -245,7 +347,7 @@ def _metric_spread(runs: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
             spread.setdefault(metric["name"], {"values": []})["values"].append(metric["value"])
     for entry in spread.values():
         values = entry["values"]
-        entry["range"] = (max(values) - min(values)) if None not in values else None
+        entry["range"] = round(max(values) - min(values), 9) if None not in values else None
     return spread
 
 
@@ -275,24 +377,40 @@ def score_run(scenario: Scenario, out: Path, options: GradeOptions, *,
                                 f"ended with: {server_tail[-400:]}"), "run": None}, []
     run_end = json.loads(run_file.read_text())
     base["run"] = run_end
+    completed = run_end["ended_by"] in ("duration", "end_point")
     try:
-        bag = bag_folder(out / RECORDING_DIR)
-        trajectory = trajectory_from_bag(bag, scenario, run_end["epoch_s"])
-    except (FileNotFoundError, OSError, ValueError) as error:
-        return {**base, **_zero(f"the recording cannot be read: {error}")}, []
-    base["recording"] = str(bag)
-    ended_by = run_end["ended_by"]
-    exited = ended_by == "stopped" and exited_cleanly(controller)
+        trajectory, notes = trajectory_from_truth(out / TRUTH_FILE, scenario)
+        _check_complete(trajectory, run_end, scenario)
+    except IncompleteRecordError as error:
+        if completed:
+            return {**base, **_zero(f"invalid run: {error}"), "invalid": True}, []
+        return {**base, **_zero(_early_end_reason(run_end, scenario, controller,
+                                                  controller_reason))}, []
+    try:
+        base["recording"] = str(bag_folder(out / RECORDING_DIR))
+    except FileNotFoundError as error:
+        base["recording"] = None
+        base["recording_note"] = str(error)
+    for health in notes.get("recording", []):
+        if health.get("messages_lost") or health.get("state") not in (None, "closed"):
+            base["recording_note"] = (
+                f"the recording is incomplete ({health.get('state')}"
+                f"{': ' + health['reason'] if health.get('reason') else ''}; "
+                f"{health.get('messages_lost', 0)} messages lost): the score is from the "
+                "simulation's own record, which is complete")
+    exited = run_end["ended_by"] == "stopped" and exited_cleanly(controller)
     last_s = run_end.get("last_command_s")
     if exited and last_s is not None and trajectory and trajectory[0].t_s <= last_s:
         trajectory = list(until(trajectory, last_s))  # a clean exit ends the run
     result = evaluate(scenario, trajectory)
     graded = result.to_json()
     graded.pop("name", None)
-    notes = run_notes(run_end)
-    if notes:
-        graded["reason"] = "; ".join([graded["reason"], *notes])
-    if ended_by in ("duration", "end_point"):
+    said = run_notes(run_end)
+    if said:
+        graded["reason"] = "; ".join([graded["reason"], *said])
+    if completed:
+        if not graded["passed"] and scenario.changes:
+            graded["reason"] += changes_hint(scenario)
         return {**base, **graded}, trajectory
     if exited:
         when = "before its first command" if last_s is None else \
@@ -300,11 +418,8 @@ def score_run(scenario: Scenario, out: Path, options: GradeOptions, *,
         graded["reason"] = (f"{graded['reason']} (the controller exited with code 0 {when}, "
                             f"of {scenario.duration_s:g} s: scored on the run until then)")
         return {**base, **graded}, trajectory
-    if ended_by == "stopped":
-        why = (f"the controller ended before the run did (at t = {run_end['sim_time_s']:.2f} "
-               f"s of {scenario.duration_s:g} s): {controller_reason}")
-    else:
-        why = "; ".join([run_end["reason"], *notes])
+    why = "; ".join([_early_end_reason(run_end, scenario, controller, controller_reason),
+                     *said])
     return {**base, **graded, "score": 0.0, "passed": False, "reason": why,
             "score_if_completed": graded["score"]}, trajectory
 
@@ -324,6 +439,64 @@ def run_notes(run_end: dict[str, Any]) -> list[str]:
             f"by the wall clock: time.sleep, a steady timer), so a re-grade can differ: grade "
             f"it with --mode wall-clock")
     return notes
+
+
+def _early_end_reason(run_end: dict[str, Any], scenario: Scenario,
+                      controller: dict[str, Any], controller_reason: str) -> str:
+    """Why a run that did not run its course scores 0 (with the controller's last error)."""
+    if run_end["ended_by"] != "stopped":
+        return str(run_end["reason"])
+    why = (f"the controller ended before the run did (at t = {run_end['sim_time_s']:.2f} "
+           f"s of {scenario.duration_s:g} s): {controller_reason}")
+    last = last_error_line(controller.get("output_tail", ""))
+    return f"{why}: {last}" if last else why
+
+
+def _check_complete(trajectory: Sequence[Sample], run_end: dict[str, Any],
+                    scenario: Scenario) -> None:
+    """Raise unless the record reaches the run's end (its sim time, or the end point).
+
+    Raises:
+        IncompleteRecordError: the record stops short of the run's end.
+    """
+    if run_end["ended_by"] != "duration":
+        return
+    last_s = trajectory[-1].t_s
+    if last_s < min(run_end["sim_time_s"], scenario.duration_s) - 1e-6:
+        raise IncompleteRecordError(f"the record of the ground truth ends at t = {last_s:.2f} s, "
+                                    f"before the run's end at {run_end['sim_time_s']:.2f} s")
+
+
+ERROR_LINE = re.compile(r"^\s*(?:[\w.]+(?:Error|Exception|Exit|Interrupt)\b.*|Error: .+|"
+                        r"[\w./-]+: (?:line \d+: )?.*(?:not found|No such file).*)$")
+
+
+def last_error_line(output: str) -> str | None:
+    """The last line of ``output`` that says what went wrong (an exception's last line).
+
+    Python's ``ModuleNotFoundError: No module named 'roslibpy'``, Node's ``Error: ...``, a
+    shell's ``python4: not found``; None if no line says so. At most 300 characters.
+    """
+    for line in reversed(output.splitlines()[-200:]):
+        if ERROR_LINE.match(line):
+            return line.strip()[:300]
+    return None
+
+
+def changes_hint(scenario: Scenario) -> str:
+    """What the scenario changed during the run, for a failure's reason (one clause)."""
+    said = []
+    for change in scenario.changes:
+        parts = [f"{name} to {value!r}" for name, value in change.parameters]
+        if change.payload is not None:
+            parts.append("the payload")
+        if change.mode is not None:
+            parts.append(f"the mode to {change.mode}")
+        if parts:
+            said.append(f"{' and '.join(parts)} at t = {change.at_s:g} s")
+    told = [name for name in controller_environment(scenario) if name.endswith("_CHANGES")]
+    tells = f" ({', '.join(told)} tells the controller; docs/grading.md)" if told else ""
+    return f" (the scenario changed {'; '.join(said)}{tells})" if said else ""
 
 
 def asdict_controller(result: Any) -> dict[str, Any]:

@@ -48,6 +48,7 @@ from typing import Any
 
 from classroom.registry import strong_token
 from grading import Scenario, load_suite
+from grading.recorded import TRUTH_FILE, TruthLog
 from physics import TICK_PERIOD_S, ConfigError, RobotParams, Simulation, load_params
 from physics.params import NoiseParams
 from ros_nodes.recording import Recorder
@@ -117,6 +118,14 @@ GRADE_NODE_PARAMETERS = {"scan_reliability": "reliable"}
 """The robot node's parameters in a graded run (``--ros``): ``/scan`` reliable, which both a
 best-effort subscriber (sensor data, as rplidar's examples) and a RELIABLE one (the Neato
 driver's, many a course's) receive."""
+
+RECORDING_MAX_BYTES = 64 * 1024 * 1024
+"""A graded run's bag is closed (complete) at this size: what a client publishes into it is
+bounded per run (a 120 s run of the robot's own topics is a few MB); the score does not read
+it (``grading.recorded.TruthLog``)."""
+
+GRAPH_READ_ONLY = "a graded run's robot cannot be changed or reset (websim grade)"
+"""``--ros``: why the robot's parameters and ``/reset_simulation`` on the graph are refused."""
 
 
 @dataclass
@@ -511,11 +520,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     robot = VirtualRobot(simulation, clock)
     token = strong_token()
     serve_args = serve_command_arguments(args)
-    recorder = Recorder(args.out / RECORDING_DIR)
+    recorder = Recorder(args.out / RECORDING_DIR, max_bytes=RECORDING_MAX_BYTES)
     site = sites.single_robot(robot, token, grade_limits(args.mode), OriginPolicy.default(
         args.host, args.http_port, []), args.ws_port, recorder=recorder,
         simulation_services=False)  # no teleport, pause or step for the graded controller
     site.ros_parameters.update(GRADE_NODE_PARAMETERS)
+    site.graph_read_only = GRAPH_READ_ONLY
     host = site.front.host  # type: ignore[attr-defined]
     host.bridge.services.add(RESET_SERVICE, "std_srvs/srv/Empty", _refuse_reset)
 
@@ -541,14 +551,18 @@ def main(argv: Sequence[str] | None = None) -> int:
                          step_on=args.step_on, out=args.out,
                          startup_timeout_s=args.startup_timeout,
                          graph=controller_graph if args.ros else None)
+    truth = TruthLog(simulation, lambda: lock_step.sim_time_s, args.out / TRUTH_FILE,
+                     lambda: lock_step.finished is not None)
     schedule = site.schedule()
     schedule.gates.append(lock_step.gate)
     schedule.tick_listeners.append(lock_step.after_tick)
+    schedule.tick_listeners.append(truth.after_tick)
     try:
         return serve_command.run(serve_args, site, token)
     finally:
         if lock_step.finished is None:
             lock_step.write()
+        truth.write(recording=[recording.health() for recording in recorder.recordings])
 
 
 def graph_subscribed(site: sites.Site) -> set[str]:

@@ -16,6 +16,11 @@ tick's time (``websim grade``'s lock step goes further: ``VirtualRobotNode.publi
 Two nodes share one rclpy ``Context`` (no global state; rclpy's signal handlers stay off, the
 server handles SIGINT and SIGTERM): ``virtual_robot`` and ``rosbridge_websocket``, the relay
 (``rosbridge.graph.relay``), as a real rosbridge deployment names them.
+
+Read-only (``read_only``, a graded run's): the graph is the bridge's equal, so what the
+bridge refuses a client the graph refuses a node: setting either node's parameters (rclpy's
+parameter services answer ``successful: false`` with the reason) and ``/reset_simulation``
+(answered without resetting, the refusal logged: ``std_srvs/Empty`` has no way to say no).
 """
 
 from __future__ import annotations
@@ -27,14 +32,16 @@ from collections.abc import Mapping
 from typing import Any
 
 import rclpy
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
+from std_srvs.srv import Empty
 
 from heartbeat.driver import TickDriver
-from ros_nodes.robot_interface import CLOCK
+from ros_nodes.robot_interface import CLOCK, RESET_SERVICE
 from ros_nodes.robot_messages import clock_msg
 from ros_nodes.simulation_node import SimulationNode
 from ros_nodes.simulation_services import SimulationServices
@@ -82,8 +89,11 @@ class RosRuntime:
     def __init__(self, robot: VirtualRobot, bridge: Bridge,
                  loop: asyncio.AbstractEventLoop, writers: Writers | None = None,
                  parameters: Mapping[str, Any] | None = None, *,
-                 simulation: SimulationServices | None = None) -> None:
+                 simulation: SimulationServices | None = None,
+                 read_only: str | None = None) -> None:
         self._bridge = bridge
+        self.refusals = 0
+        """Changes refused on the graph (``read_only``)."""
 
         def write_queued() -> None:  # what a function handed to the loop queued, at once
             if writers is not None:
@@ -112,6 +122,8 @@ class RosRuntime:
             with contextlib.suppress(RuntimeError):  # the loop closed while shutting down
                 loop.call_soon_threadsafe(publish, topic, type_name, msg, latched)
 
+        if read_only is not None:
+            self._refuse_changes(read_only)
         self.relay = GraphRelay(self.relay_node, deliver)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.relay.services = GraphServices(self.relay_node, self.executor, loop,
@@ -129,6 +141,28 @@ class RosRuntime:
         self._simulation_thread = threading.Thread(
             target=spin_until_shutdown, args=(self.simulation_executor, self.context),
             name="rclpy-simulation", daemon=True)
+
+    def _refuse_changes(self, reason: str) -> None:
+        """Nothing on the graph may change the robot: parameters and reset refused."""
+        logger = self.robot_node.get_logger()
+
+        def refuse_parameters(parameters: list[Any]) -> SetParametersResult:
+            self.refusals += 1
+            logger.error(f"parameters {[p.name for p in parameters]} refused: {reason}")
+            return SetParametersResult(successful=False, reason=reason)
+
+        for node in (self.robot_node, self.relay_node):
+            node.add_on_set_parameters_callback(refuse_parameters)
+        for service in list(self.robot_node.services):
+            if service.srv_name == RESET_SERVICE:
+                self.robot_node.destroy_service(service)
+
+        def refuse_reset(request: Any, response: Any) -> Any:
+            self.refusals += 1
+            logger.error(f"{RESET_SERVICE} refused: {reason}")
+            return response
+
+        self.robot_node.create_service(Empty, RESET_SERVICE, refuse_reset)
 
     def start(self) -> None:
         """Spin the executor and relay the bridge's topics and actions from now on."""

@@ -511,8 +511,8 @@ def _start_ros(site: Site, loop: asyncio.AbstractEventLoop) -> RosGraph:
         localhost_only_discovery(os.environ)
     if site.robot is not None and isinstance(site.front, SimServer):
         runtime = RosRuntime(site.robot, site.front.bridge, loop, site.front.driver.writers,
-                             site.ros_parameters,
-                             simulation=site.simulation)
+                             site.ros_parameters, simulation=site.simulation,
+                             read_only=site.graph_read_only)
     elif site.classroom is not None:
         hosts = site.class_hosts()
         unnamable = [name for name, _ in hosts if not NAME_TOKEN.fullmatch(name)]

@@ -87,6 +87,8 @@ class Site:
         replay: a replay's player (``websim.replay.ReplayHost``), else None.
         arena: a class whose robots share one world (``--arena``): the dashboard also
             draws it as one map.
+        graph_read_only: with ``--ros``, why nothing on the ROS graph may change the robot
+            (its parameters, ``/reset_simulation``): a graded run's; None: the graph may.
     """
 
     front: WebSocketFront
@@ -104,6 +106,7 @@ class Site:
     admin_token: str = ""
     replay: Any = None
     arena: bool = False
+    graph_read_only: str | None = None
 
     def close(self) -> None:
         """Close the recordings, save a class's state and release its file (at shutdown)."""

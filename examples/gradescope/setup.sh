@@ -5,6 +5,6 @@
 # docs/grading.md, "Gradescope".
 set -euo pipefail
 apt-get update
-apt-get install -y --no-install-recommends bubblewrap util-linux python3 python3-venv
+apt-get install -y --no-install-recommends bubblewrap util-linux libseccomp2 python3 python3-venv
 python3 -m venv /opt/websim
-/opt/websim/bin/pip install --no-cache-dir /autograder/source/websim-*.whl roslibpy
+/opt/websim/bin/pip install --no-cache-dir /autograder/source/websim-*.whl   # with roslibpy, pyseccomp

@@ -86,6 +86,8 @@ def account_files(uid: int, home: str, into: Path) -> tuple[Path, Path]:
     passwd.write_text(_lines_of("/etc/passwd")
                       + f"{USER_NAME}:x:{uid}:{uid}:websim submission:{home}:/bin/sh\n")
     group.write_text(_lines_of("/etc/group") + f"{USER_NAME}:x:{uid}:\n")
+    for path in (passwd, group):
+        path.chmod(0o644)  # whatever the grader's umask: every program reads them
     return passwd, group
 
 

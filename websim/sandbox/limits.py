@@ -47,6 +47,9 @@ class SandboxLimits:
             submission and all it writes there, bytes.
         output_tail_bytes: how much of the controller's output (stdout and stderr together)
             is kept: the last this many bytes; the rest is counted and dropped.
+        cpus: the CPU time its processes may have together, in cores (a cgroup's quota,
+            where one can be made; all of them weigh as one process besides,
+            ``cgroups.CPU_SHARES_V1``).
     """
 
     wall_time_s: float = 600.0
@@ -58,6 +61,7 @@ class SandboxLimits:
     tmp_bytes: int = 64 * MIB
     home_bytes: int = 256 * MIB
     output_tail_bytes: int = 64 * KIB
+    cpus: float = 1.0
 
     def __post_init__(self) -> None:
         if not 0 < self.wall_time_s <= MAX_WALL_TIME_S:
@@ -68,6 +72,8 @@ class SandboxLimits:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a whole number of at least 1, got {value!r}")
+        if not 0.01 <= self.cpus <= 1024:
+            raise ValueError(f"cpus must be in [0.01, 1024] cores, got {self.cpus!r}")
         if self.open_files < 16:
             raise ValueError(f"open_files must be at least 16 (stdin, stdout, stderr and the "
                              f"interpreter's own), got {self.open_files}")

@@ -14,6 +14,7 @@ private path that lies inside a path made visible (the grade folder inside a che
 from __future__ import annotations
 
 import os
+import shlex
 import sys
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
@@ -92,26 +93,40 @@ def visible_paths(extra: Sequence[str | os.PathLike[str]]) -> tuple[str, ...]:
     return tuple(outermost)
 
 
-def bwrap_options(*, visible: Sequence[str], hidden: Sequence[str], submission_copy: Path,
-                  accounts: tuple[Path, Path], limits: SandboxLimits,
-                  env: Mapping[str, str], own_network: bool) -> list[str]:
+def bwrap_options(*, uid: int, privileged: bool, visible: Sequence[str],
+                  hidden: Sequence[str], submission_copy: Path, accounts: tuple[Path, Path],
+                  runtime_bin: Path, limits: SandboxLimits, env: Mapping[str, str],
+                  own_network: bool) -> list[str]:
     """Bubblewrap's options for a controller (all but the command; given through ``--args``).
 
+    Two ways, one result. As root (``privileged``), bubblewrap runs as root, so that it may
+    bind what only root may read (a Python under ``/root``, pyenv's), and keeps the two
+    capabilities ``setpriv`` needs to become ``uid`` (which drops them). Otherwise it runs
+    as the grader's user, unprivileged, in a user namespace of its own (``--unshare-user``,
+    ``uid`` its only user) in which none may be made (``--disable-userns``). In both the
+    system-call filter (``syscalls``) refuses new namespaces.
+
     Args:
+        uid: the sandbox's user (and group), inside and out.
+        privileged: bubblewrap runs as root (the grader is root).
         visible: the paths bound read-only beside the system (``visible_paths``).
         hidden: private paths of the grader; any that lies in a visible path is covered.
         submission_copy: the copy of the submission its user owns, bound read-only on
             ``SUBMISSION_DIR`` (``COPY_AND_RUN`` copies it to ``HOME_DIR``).
         accounts: the passwd and group files with the sandbox's user (``account_files``).
+        runtime_bin: the folder of ``python3`` and ``python`` (``runtime_commands``), bound
+            on ``RUNTIME_BIN``.
         limits: the sizes of ``/tmp``, ``/dev/shm`` and the home.
         env: the controller's whole environment.
         own_network: make a network namespace of its own (True when no simulator shares one
             with it).
     """
-    options = ["--unshare-pid", "--unshare-ipc", "--unshare-uts", "--hostname", HOSTNAME,
-               "--unshare-cgroup-try", "--die-with-parent", "--new-session",
-               # setpriv needs these two to become the sandbox's user; it drops them
-               "--cap-add", "CAP_SETUID", "--cap-add", "CAP_SETGID", "--clearenv"]
+    if privileged:  # setpriv needs these two to become the sandbox's user; it drops them
+        options = ["--cap-add", "CAP_SETUID", "--cap-add", "CAP_SETGID"]
+    else:
+        options = ["--unshare-user", "--disable-userns", "--uid", str(uid), "--gid", str(uid)]
+    options += ["--unshare-pid", "--unshare-ipc", "--unshare-uts", "--hostname", HOSTNAME,
+                "--unshare-cgroup-try", "--die-with-parent", "--new-session", "--clearenv"]
     if own_network:
         options.append("--unshare-net")
     for name, value in env.items():
@@ -129,9 +144,9 @@ def bwrap_options(*, visible: Sequence[str], hidden: Sequence[str], submission_c
                 os.path.dirname(HOME_DIR)]
     bound: list[str] = list(SYSTEM_PATHS)  # binds: what is in them exists
     folders = {"/tmp", "/dev", "/dev/shm", "/home"}  # folders that exist (bwrap's are 0700)
-    for path in visible:
-        source = os.path.realpath(path)
-        for target in dict.fromkeys((path, source)):
+    for path in (*visible, RUNTIME_BIN):
+        source = os.path.realpath(path) if path != RUNTIME_BIN else str(runtime_bin)
+        for target in dict.fromkeys((path, source) if path != RUNTIME_BIN else (path,)):
             for parent in map(str, reversed(Path(target).parents[:-1])):  # outermost first
                 if parent not in folders and not is_within(parent, bound):
                     options += ["--perms", "0755", "--dir", parent]
@@ -151,17 +166,43 @@ def bwrap_options(*, visible: Sequence[str], hidden: Sequence[str], submission_c
     return options
 
 
+RUNTIME_BIN = "/websim/bin"
+"""Inside the sandbox: ``python3`` and ``python``, the Python that runs websim (first on the
+controller's ``PATH``): the runtime the docs promise, roslibpy included, however websim was
+installed (a venv, pipx), not whichever ``python3`` the system has."""
+
+RUNTIME_COMMANDS = ("python3", "python")
+
+
+def runtime_commands(folder: Path, python: str = sys.executable) -> Path:
+    """Write ``folder``'s ``python3`` and ``python``: each runs ``python`` (websim's).
+
+    A script, not a link: a venv's Python finds its packages from the path it was started
+    by (its ``pyvenv.cfg`` beside it), which a link elsewhere would lose.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    folder.chmod(0o755)  # whatever the grader's umask: the sandbox's user runs them
+    for name in RUNTIME_COMMANDS:
+        script = folder / name
+        script.write_text(f"#!/bin/sh\nexec {shlex.quote(python)} \"$@\"\n")
+        script.chmod(0o755)
+    return folder
+
+
 def command_in_home(command: Sequence[str]) -> list[str]:
     """``command``, preceded by the copy of the submission into its home (``COPY_AND_RUN``)."""
     return ["/bin/sh", "-c", COPY_AND_RUN, SUBMISSION_DIR, *command]
 
 
 def controller_environment(run_env: Mapping[str, str], *, home: str, visible: Sequence[str],
-                           sandboxed: bool,
+                           sandboxed: bool, runtime_bin: str | None = None,
+                           node_path: Sequence[str] = (),
                            grader_env: Mapping[str, str] = os.environ) -> dict[str, str]:
     """A controller's whole environment: nothing of the grader's but what it needs.
 
-    ``PATH`` (its entries the controller can see), ``HOME`` (its copy of the submission),
+    ``PATH`` (``runtime_bin`` first: websim's Python as ``python3``; then its entries the
+    controller can see), ``NODE_PATH`` (``node_path``: roslib for Node), ``HOME`` (its copy
+    of the submission),
     ``TMPDIR``, ``LANG``, unbuffered Python output (so its last
     lines reach the report when it is stopped), the user's name, ROS 2's variables
     (``PASSED_ENV``, ``PASSED_PATH_LISTS``), then ``run_env`` (``WEBSIM_URL``,
@@ -179,8 +220,9 @@ def controller_environment(run_env: Mapping[str, str], *, home: str, visible: Se
                         if entry and os.path.isabs(entry)
                         and is_within(os.path.normpath(entry), seen))
 
+    path = visible_entries(grader_env.get("PATH", "")) or DEFAULT_PATH
     env = {
-        "PATH": visible_entries(grader_env.get("PATH", "")) or DEFAULT_PATH,
+        "PATH": path if runtime_bin is None else f"{runtime_bin}:{path}",
         "HOME": home,
         "TMPDIR": "/tmp" if sandboxed else grader_env.get("TMPDIR", "/tmp"),
         "LANG": "C.UTF-8",
@@ -188,6 +230,8 @@ def controller_environment(run_env: Mapping[str, str], *, home: str, visible: Se
         "USER": USER_NAME if sandboxed else grader_env.get("USER", USER_NAME),
         "LOGNAME": USER_NAME if sandboxed else grader_env.get("LOGNAME", USER_NAME),
     }
+    if node_path:
+        env["NODE_PATH"] = ":".join(node_path)
     for name in PASSED_ENV:
         if name in grader_env:
             env[name] = grader_env[name]

@@ -52,9 +52,12 @@ class Observed:
             or None if it ended by itself.
         wall_time_s: from start to end, s.
         peak_tasks: the most processes and threads seen at once (None if not sampled).
-        peak_memory_bytes: the most resident memory seen at once, all processes together.
+        peak_memory_bytes: the most memory seen at once, all processes together (as its
+            cgroup counts it, socket buffers included; else their resident memory and their
+            sockets' queues).
         output_tail: the last bytes of the output.
         output_bytes: all the bytes of output, kept or not.
+        oom_killed: the kernel killed one of its processes for its cgroup's memory limit.
     """
 
     exit_status: int | None
@@ -65,6 +68,7 @@ class Observed:
     peak_memory_bytes: int | None
     output_tail: bytes
     output_bytes: int
+    oom_killed: bool = False
 
 
 @dataclass(frozen=True)
@@ -87,6 +91,7 @@ class ControllerResult:
         output_tail: the end of its output (stdout and stderr together), as text.
         output_bytes: how many bytes it printed in all.
         limits: the limits it ran under.
+        oom_killed: the kernel killed one of its processes at its cgroup's memory limit.
     """
 
     sandboxed: bool
@@ -102,6 +107,7 @@ class ControllerResult:
     output_tail: str
     output_bytes: int
     limits: SandboxLimits
+    oom_killed: bool = False
 
     @property
     def output_truncated(self) -> bool:
@@ -114,6 +120,10 @@ class ControllerResult:
         limits = self.limits
         if self.ended_by == "wall_time":
             ending = f"stopped at the wall-clock limit ({limits.wall_time_s:g} s)"
+        elif self.ended_by == "memory" and self.oom_killed:
+            ending = (f"stopped: its processes needed more than the memory limit "
+                      f"({size_text(limits.memory_bytes)}) together, and the kernel killed "
+                      "one")
         elif self.ended_by == "memory":
             ending = (f"stopped: its processes held {size_text(self.peak_memory_bytes or 0)} "
                       f"together, over the memory limit ({size_text(limits.memory_bytes)})")
@@ -141,6 +151,8 @@ class ControllerResult:
         signal_name = _signal_name(signum) if signum is not None else None
         if observed.stopped_by is not None:
             ended_by = observed.stopped_by
+        elif observed.oom_killed and signal_name == "SIGKILL":
+            ended_by = "memory"  # the kernel killed it at its cgroup's memory limit
         else:
             ended_by = "signal" if signum is not None else "exit"
         exit_code = None if signum is not None else status
@@ -151,7 +163,8 @@ class ControllerResult:
             wall_time_s=round(observed.wall_time_s, 3),
             peak_tasks=observed.peak_tasks, peak_memory_bytes=observed.peak_memory_bytes,
             output_tail=observed.output_tail.decode("utf-8", errors="replace"),
-            output_bytes=observed.output_bytes, limits=limits)
+            output_bytes=observed.output_bytes, limits=limits,
+            oom_killed=observed.oom_killed)
 
 
 @dataclass(frozen=True)
@@ -174,6 +187,8 @@ def _limits_hit(observed: Observed, signal_name: str | None, ended_by: str,
     hit: set[str] = set()
     if ended_by in ("wall_time", "memory"):
         hit.add(ended_by)
+    if observed.oom_killed:
+        hit.add("memory")
     if signal_name == "SIGXCPU":  # (one that catches it gets SIGKILL: a kill of unknown cause)
         hit.add("cpu_time")
     if signal_name == "SIGXFSZ":

@@ -1,8 +1,10 @@
 """Watching a controller from outside: its output's tail, its processes, their memory.
 
-The processes of a sandboxed controller are those of its user (each sandbox has a user of
-its own, ``identity.py``); without the sandbox, those of the session it was started in (a
-program that leaves its session escapes this count, which is one reason the sandbox exists).
+The processes of a sandboxed controller are those of its process namespace (each sandbox
+has its own, which none of its processes can leave); without the sandbox, those of the
+session it was started in (a program that leaves its session escapes this count, which is
+one reason the sandbox exists). What its sockets hold in the kernel is read from its
+network namespace's ``/proc/PID/net`` tables (``socket_bytes``).
 """
 
 from __future__ import annotations
@@ -112,11 +114,12 @@ class Usage:
     rss_bytes: int
 
 
-def usage(*, uid: int | None = None, session: int | None = None) -> Usage:
-    """The processes whose real user is ``uid``, or whose session is ``session``.
+def usage(*, uid: int | None = None, session: int | None = None,
+          pidns: int | None = None) -> Usage:
+    """The processes of a user (``uid``), a session or a process namespace (its inode).
 
     Read from each ``/proc/PID/status`` (not the owner of ``/proc/PID``, which a process
-    can turn to root with ``prctl(PR_SET_DUMPABLE, 0)``).
+    can turn to root with ``prctl(PR_SET_DUMPABLE, 0)``) and ``/proc/PID/ns/pid``.
     """
     pids: list[int] = []
     tasks = rss_kib = 0
@@ -134,10 +137,46 @@ def usage(*, uid: int | None = None, session: int | None = None) -> Usage:
             continue
         if session is not None and fields.get(b"NSsid", -1) != session:
             continue
+        if pidns is not None and _pid_namespace(entry.name) != pidns:
+            continue
         pids.append(int(entry.name))
         tasks += fields.get(b"Threads", 1)
         rss_kib += fields.get(b"VmRSS", 0)
     return Usage(tuple(pids), tasks, rss_kib * 1024)
+
+
+def _pid_namespace(pid: str) -> int | None:
+    """The inode of a process's pid namespace (None once it has gone)."""
+    try:
+        return os.stat(f"/proc/{pid}/ns/pid").st_ino
+    except OSError:
+        return None
+
+
+SOCKET_TABLES = ("tcp", "tcp6", "udp", "udp6")
+
+
+def socket_bytes(pid: int, tables: tuple[str, ...] = SOCKET_TABLES) -> int:
+    """The bytes queued in the sockets of ``pid``'s network namespace (sent and received).
+
+    From ``/proc/PID/net/TABLE`` (``tcp``, ``udp`` and their ``6``): each socket's
+    ``tx_queue`` and ``rx_queue`` (what the kernel holds for it). 0 once the process has
+    gone.
+    """
+    total = 0
+    for table in tables:
+        try:
+            with open(f"/proc/{pid}/net/{table}", "rb") as file:
+                lines = file.read().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            fields = line.split()
+            if len(fields) > 4:
+                sent, _, received = fields[4].partition(b":")
+                with contextlib.suppress(ValueError):
+                    total += int(sent, 16) + int(received, 16)
+    return total
 
 
 ZOMBIE = -1
@@ -162,15 +201,16 @@ def _status_fields(text: bytes) -> dict[bytes, int]:
     return fields
 
 
-def kill_all(*, uid: int | None = None, session: int | None = None) -> bool:
-    """SIGKILL every process of ``uid`` (or ``session``) until none is left.
+def kill_all(*, uid: int | None = None, session: int | None = None,
+             pidns: int | None = None) -> bool:
+    """SIGKILL every process of ``uid`` (or ``session``, or ``pidns``) until none is left.
 
     A process may fork while its siblings die, so this repeats until a scan finds none, up
     to ``STOP_WAIT_S``. Returns True when none is left.
     """
     deadline = time.monotonic() + STOP_WAIT_S
     while True:
-        pids = usage(uid=uid, session=session).pids
+        pids = usage(uid=uid, session=session, pidns=pidns).pids
         if not pids:
             return True
         if time.monotonic() > deadline:
