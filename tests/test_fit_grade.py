@@ -25,10 +25,11 @@ def heading_metric(tmp_path: Path, name: str, *options: str) -> dict:
     shutil.copy(SOLUTIONS / "heading_pid.py", folder / "heading_pid.py")
     out = tmp_path / f"{name}-out"
     sandbox = () if SANDBOXED else ("--no-sandbox",)
-    assert cli.main(["grade", "heading_pid", "--submission", str(folder), "--out", str(out),
-                     *sandbox, *options, "--", "python3", "heading_pid.py"]) == 0
+    status = cli.main(["grade", "heading_pid", "--submission", str(folder), "--out", str(out),
+                       *sandbox, *options, "--", "python3", "heading_pid.py"])
     report = json.loads((out / "heading_pid" / "report.json").read_text())
     assert report["run"]["ended_by"] == "duration"
+    assert status == (0 if report["passed"] else 1)  # 1: graded, a scenario failed
     return report["metrics"][0]
 
 
@@ -38,6 +39,7 @@ def test_a_graded_run_uses_the_robot_of_the_parameter_file(tmp_path: Path) -> No
                     "  angular_accel_limit_rps2: 2.0\n")
     shipped = heading_metric(tmp_path, "shipped")
     lagged = heading_metric(tmp_path, "lagged", "--params", str(slow))
+    assert shipped["passed"] and not lagged["passed"]  # the slow robot fails the settling
     assert shipped["inputs"] == lagged["inputs"]
     assert lagged["value"] != pytest.approx(shipped["value"], rel=0.05)
 
