@@ -135,8 +135,10 @@ def test_everything_the_pages_load_is_in_the_image() -> None:
             installed = (WEB_DIR / "node_modules").exists()
             published = not installed or (WEB_DIR / path).is_file()
         else:
-            published = (WEB_DIR / path).is_file() and any(
-                fnmatch.fnmatch(path, source) or path.startswith(source.rstrip("/") + "/")
+            # a clean URL (/class) is its page: nginx.conf's try_files $uri.html
+            file = path if (WEB_DIR / path).is_file() or "." in path else f"{path}.html"
+            published = (WEB_DIR / file).is_file() and any(
+                fnmatch.fnmatch(file, source) or file.startswith(source.rstrip("/") + "/")
                 for source in sources)
         if not published:
             missing.append(path)

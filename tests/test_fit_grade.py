@@ -26,7 +26,7 @@ def heading_metric(tmp_path: Path, name: str, *options: str) -> dict:
     out = tmp_path / f"{name}-out"
     sandbox = () if SANDBOXED else ("--no-sandbox",)
     assert cli.main(["grade", "heading_pid", "--submission", str(folder), "--out", str(out),
-                     *sandbox, *options, "--", "python3", "heading_pid.py"]) == 0
+                     *sandbox, *options, "--", "python3", "heading_pid.py"]) in (0, 1)  # graded
     report = json.loads((out / "heading_pid" / "report.json").read_text())
     assert report["run"]["ended_by"] == "duration"
     return report["metrics"][0]
