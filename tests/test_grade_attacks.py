@@ -180,9 +180,8 @@ def test_a_cpu_burner_does_not_starve_a_classmates_run(tmp_path: Path) -> None:
     rows = {row["student"]: row for row in csv.DictReader((out / "grades.csv").open())}
     assert rows["alice"]["reason"] == "passed", rows["alice"]["reason"]
     assert float(rows["alice"]["total"]) == 1.0
-    # --step-on auto (the default) waits for /odom, /scan or /clock
-    assert "did not subscribe to /odom or /scan or /clock" in rows["mallory"]["reason"]
-    assert "within 30 s: the run never started" in rows["mallory"]["reason"]
+    assert "did not subscribe to /odom" in rows["mallory"]["reason"]
+    assert "within 30 s" in rows["mallory"]["reason"]
     if SANDBOXED:
         isolation = report(out / "mallory", "heading_pid")["controller"]["isolation"]
         assert "CPU share bounded by its cgroup" in isolation or "sampled" in isolation

@@ -239,7 +239,7 @@ def test_an_incompatible_subscription_is_named_in_the_reason(tmp_path: Path) -> 
     folder.mkdir()
     (folder / "late.py").write_text(textwrap.dedent(INCOMPATIBLE))
     out = tmp_path / "out"
-    assert grade(folder, out, "python3", "late.py") == 1  # graded: its scenario failed
+    assert grade(folder, out, "python3", "late.py") == 1  # graded, and failed
     graded = report(out)
     assert graded["score"] == 0.0 and graded["run"]["commands"] == 0
     assert "/odom: /late_joiner subscribes RELIABLE, TRANSIENT_LOCAL, the simulator " \
