@@ -164,9 +164,14 @@ def check_runtime(commands: Sequence[Sequence[str]], options: GradeOptions) -> N
     python_runtime_paths()
     uses_node = any(command and os.path.basename(command[0]) in ("node", "nodejs")
                     for command in commands)
-    modules = options.node_modules if options.node_modules is not None \
-        else node_modules_found()
-    if uses_node and not any(has_roslib(Path(folder)) for folder in modules):
+    if not uses_node:
+        return
+    if options.node_modules is not None:
+        if not any(has_roslib(Path(folder)) for folder in options.node_modules):
+            raise RuntimeError(f"--node-modules {', '.join(options.node_modules)}: no "
+                               "roslib there (roslib/package.json), which a controller "
+                               "running node requires")
+    elif not node_modules_found():
         raise RuntimeError(
             "a controller runs node, but this websim has no roslib for Node (neither a "
             "checkout's web-interface/node_modules nor a wheel's websim/_share/node_modules): "
