@@ -1,14 +1,16 @@
 """The build step that makes the wheel carry what ``websim serve`` needs besides the code.
 
 Robot parameters, worlds, the command files of ``websim compare``, the graded scenarios
-(``grading``) and the page with its third-party JavaScript, so an installed websim runs from
-any folder, offline.
+(``grading``), the page with its third-party JavaScript, and roslib for Node (what a graded
+JavaScript controller ``require``s), so an installed websim runs from any folder, offline.
 
 ``pyproject.toml`` holds the project's metadata; this file only adds that build step. The page's
 libraries (roslib, uPlot, nipplejs) are the committed npm lock's: installed with ``npm ci`` when
 ``web-interface/node_modules`` is missing or older than the lock (so building needs Node then;
 installing the wheel never does). Which files of the page are carried is the page server's own
-allow-list (``websim/web_files.py``). An editable install copies nothing: the checkout serves.
+allow-list (``websim/web_files.py``); roslib for Node, its dependency closure by the same lock,
+goes to a folder of its own beside the page's, never published (``websim/node_roslib.py``). An
+editable install copies nothing: the checkout serves.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import runpy
 import shutil
 import subprocess
+from collections.abc import Iterable
 from pathlib import Path
 
 from setuptools import setup
@@ -24,6 +27,7 @@ from setuptools.command.build_py import build_py
 ROOT = Path(__file__).resolve().parent
 WEB_DIR = ROOT / "web-interface"
 WEB_FILES = runpy.run_path(str(ROOT / "websim" / "web_files.py"))
+NODE_ROSLIB = runpy.run_path(str(ROOT / "websim" / "node_roslib.py"))
 EXAMPLES = ("course_snippets.py", "course_snippets.js")
 
 
@@ -47,7 +51,8 @@ class BuildWithShippedFiles(build_py):
 
     ``physics/_share``: the robot parameters, the worlds, the command files of
     ``websim compare``, the scenarios of ``grading`` and the course's snippets (the Code
-    panel's examples); ``websim/_share``: the page.
+    panel's examples); ``websim/_share``: the page (``web-interface``) and roslib for Node
+    (``node_modules``).
     """
 
     def run(self) -> None:
@@ -64,11 +69,21 @@ class BuildWithShippedFiles(build_py):
                 shutil.copy2(source, target / source.name)
         for example in EXAMPLES:  # the Code panel's examples (websim.code_starters)
             shutil.copy2(ROOT / "examples" / example, build / "physics" / "_share" / "examples")
-        web_target = build / "websim" / "_share" / "web-interface"
-        for relative in WEB_FILES["published_files"](WEB_DIR):
-            destination = web_target / relative
-            destination.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(WEB_DIR / relative, destination)
+        share = build / "websim" / "_share"
+        copy_tree(WEB_DIR, share / "web-interface", WEB_FILES["published_files"](WEB_DIR))
+        modules = WEB_DIR / "node_modules"
+        node_target = share / NODE_ROSLIB["WHEEL_FOLDER"]
+        copy_tree(modules, node_target, NODE_ROSLIB["carried_files"](modules))
+        (node_target / NODE_ROSLIB["LOCK_FILE"]).write_text(NODE_ROSLIB["closure_lock"](modules))
+
+
+def copy_tree(source: Path, target: Path, relatives: Iterable[str]) -> None:
+    """``target`` holding exactly the files ``relatives`` of ``source``, nothing kept before."""
+    shutil.rmtree(target, ignore_errors=True)
+    for relative in relatives:
+        destination = target / relative
+        destination.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(source / relative, destination)
 
 
 setup(cmdclass={"build_py": BuildWithShippedFiles})

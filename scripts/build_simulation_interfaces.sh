@@ -6,7 +6,9 @@
 # /NAME/teleport_absolute, ...) on the ROS graph; neither package is on PyPI. This builds both
 # with scripts/build_ros_interface.sh (the wheels' own rosidl) from the definitions websim
 # ships (rosbridge/msgs/interfaces/: simulation_interfaces as Humble 1.4 to Kilted 1.6 define
-# it, turtlesim's four services), so their type hashes match a ROS install's. Needs cmake and
+# it, turtlesim's four services), so their type hashes match a ROS install's (for
+# simulation_interfaces, tests/test_simulation_interfaces_hashes.py holds them to upstream's
+# 1.6.1, built with the same rosidl: tests/type_hashes/). Needs cmake and
 # a C/C++ compiler (Debian: apt-get install cmake g++); about a minute. Does nothing for a
 # package that already imports (a ROS 2 installation, or an earlier run).
 #

@@ -257,8 +257,7 @@ ROSLIB = SOLUTIONS.parent.parent / "web-interface" / "node_modules"
                     reason="Node or roslib missing: run npm ci in web-interface/")
 def test_roslibjs_heading_pid_grades_as_the_roslibpy_one(tmp_path: Path) -> None:
     python_folder = submission(tmp_path / "py", "heading_pid.py")
-    node_folder = submission(tmp_path / "js", "heading_pid.js")
-    shutil.copytree(ROSLIB, node_folder / "node_modules", symlinks=True)
+    node_folder = submission(tmp_path / "js", "heading_pid.js")  # websim gives it roslib
     assert grade("heading_pid", python_folder, tmp_path / "out-py", "python3",
                  "heading_pid.py") == 0
     assert grade("heading_pid", node_folder, tmp_path / "out-js", "node", "heading_pid.js") == 0
@@ -267,6 +266,18 @@ def test_roslibjs_heading_pid_grades_as_the_roslibpy_one(tmp_path: Path) -> None
     assert by_node["passed"] is True and by_node["score"] == 1.0
     # the same controller in two languages, in lock step: the same trajectory, to the digit
     assert by_node["metrics"] == by_python["metrics"]
+
+
+def test_a_node_modules_folder_without_roslib_is_refused_before_grading(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = submission(tmp_path / "js", "heading_pid.js")
+    empty = tmp_path / "modules"
+    empty.mkdir()
+    out = tmp_path / "out"
+    assert grade("heading_pid", folder, out, "node", "heading_pid.js",
+                 options=("--node-modules", str(empty))) == 2
+    assert f"--node-modules {empty}: no roslib there" in capsys.readouterr().err
+    assert not (out / "heading_pid" / "report.json").exists()
 
 
 def test_reference_go_to_goal_passes_the_maze(tmp_path: Path) -> None:

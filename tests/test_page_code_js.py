@@ -42,7 +42,7 @@ from page_helpers import (
     yaw_of,
 )
 
-from websim.submissions import roslib_closure
+from websim.node_roslib import roslib_closure
 
 from chromium import skip_reason
 from server_process import ServerProcess, wait_for

@@ -42,6 +42,7 @@ from classroom.state import ClassState
 from ros_nodes.robot_interface import ROBOTS_PREFIX
 from rosbridge.core.limits import TrustedProxies, budget_key
 from websim.code_starters import assignments, examples
+from websim.node_roslib import roslib_modules
 from websim.submissions import (
     LANGUAGES,
     RefusedError,
@@ -78,17 +79,14 @@ class CodeRoutes:
         classroom: the class (None: a single robot).
         is_admin_token: the instructor's (admin) token check.
         proxies: trusted proxies (a single robot's submissions count per client address).
-        web_dir: the web folder (for roslib, copied into exported JavaScript programs).
     """
 
     def __init__(self, queue: SubmissionQueue, classroom: Classroom | None,
-                 is_admin_token: Any, proxies: TrustedProxies | None = None,
-                 web_dir: Path | None = None) -> None:
+                 is_admin_token: Any, proxies: TrustedProxies | None = None) -> None:
         self.queue = queue
         self.classroom = classroom
         self.is_admin_token = is_admin_token
         self.proxies = proxies or TrustedProxies()
-        self.web_dir = web_dir
         self._assignments = assignments()
         self._examples = examples()
         queue.assignments = {a["name"] for a in self._assignments}
@@ -274,9 +272,8 @@ class CodeRoutes:
         """
         assert self.state is not None
         modules = None  # JavaScript folders get roslib where the server has its Node package
-        if self.web_dir is not None and \
-                self.queue.grader.language_unavailable("javascript") is None:
-            modules = self.web_dir / "node_modules"
+        if self.queue.grader.language_unavailable("javascript") is None:
+            modules = self.queue.grader.roslib_modules
         buffer = io.BytesIO()
         with tempfile.TemporaryDirectory(prefix="websim-export-") as folder, \
                 zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
@@ -343,9 +340,13 @@ def _program(body: dict[str, Any], limits: SubmitLimits) -> tuple[str, str]:
 
 
 def code_routes(classroom: Classroom | None, is_admin_token: Any, proxies: TrustedProxies,
-                web_dir: Path, limits: SubmitLimits) -> CodeRoutes:
-    """The Code routes of a ``websim serve``: Submit graded by ``websim grade`` in its sandbox."""
+                limits: SubmitLimits) -> CodeRoutes:
+    """The Code routes of a ``websim serve``: Submit graded by ``websim grade`` in its sandbox.
+
+    JavaScript with roslib for Node where this websim has it (``websim.node_roslib``: a
+    checkout's after ``npm ci``, or the wheel's).
+    """
     from websim.submissions import Grader
-    grader = Grader(web_dir / "node_modules")
+    grader = Grader(roslib_modules())
     return CodeRoutes(SubmissionQueue(limits, grader, set()), classroom, is_admin_token,
-                      proxies, web_dir)
+                      proxies)

@@ -98,8 +98,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "alone; 640 or 644 to share them)")
     parser.add_argument("--node-modules", type=Path, default=None, metavar="DIR",
                         help="a node_modules folder with roslib for Node, for roslibjs "
-                             "controllers (default: this checkout's web-interface/"
-                             "node_modules when it has one)")
+                             "controllers (default: websim's own roslib 1.4.1: a "
+                             "checkout's web-interface/node_modules, else the wheel's)")
 
 
 def _positive_int(text: str) -> int:

@@ -56,6 +56,7 @@ from websim.grade_server import (
     STEP_TIMEOUT_S,
     on_robot,
 )
+from websim.node_roslib import has_roslib, node_modules_found
 from websim.sandbox import (
     SandboxLimits,
     SimulatorStartError,
@@ -138,18 +139,6 @@ def ros_arguments(scenario: Scenario, options: GradeOptions) -> list[str]:
     return arguments
 
 
-CHECKOUT_NODE_MODULES = Path(__file__).resolve().parent.parent / "web-interface" / "node_modules"
-"""roslib for Node in a checkout of websim (``npm ci`` in web-interface/): a wheel ships only
-the browser's build of it."""
-
-
-def node_modules_found() -> tuple[str, ...]:
-    """The folders of Node modules a controller gets when none are given: the checkout's."""
-    if (CHECKOUT_NODE_MODULES / "roslib" / "package.json").is_file():
-        return (str(CHECKOUT_NODE_MODULES),)
-    return ()
-
-
 def python_runtime_paths() -> tuple[str, ...]:
     """Folders a controller must see for websim's Python to import roslibpy.
 
@@ -175,13 +164,19 @@ def check_runtime(commands: Sequence[Sequence[str]], options: GradeOptions) -> N
     python_runtime_paths()
     uses_node = any(command and os.path.basename(command[0]) in ("node", "nodejs")
                     for command in commands)
-    modules = options.node_modules if options.node_modules is not None \
-        else node_modules_found()
-    if uses_node and not any((Path(folder) / "roslib").is_dir() for folder in modules):
+    if not uses_node:
+        return
+    if options.node_modules is not None:
+        if not any(has_roslib(Path(folder)) for folder in options.node_modules):
+            raise RuntimeError(f"--node-modules {', '.join(options.node_modules)}: no "
+                               "roslib there (roslib/package.json), which a controller "
+                               "running node requires")
+    elif not node_modules_found():
         raise RuntimeError(
-            "a controller runs node, but this websim has no roslib for Node (a wheel ships "
-            "only the browser's): npm install roslib@1.4.1 into a folder and give its "
-            "node_modules with --node-modules DIR")
+            "a controller runs node, but this websim has no roslib for Node (neither a "
+            "checkout's web-interface/node_modules nor a wheel's websim/_share/node_modules): "
+            "npm install roslib@1.4.1 into a folder and give its node_modules with "
+            "--node-modules DIR")
 
 
 def ros_environment(sandboxed: bool) -> dict[str, str]:

@@ -335,7 +335,7 @@ async def serve_forever(args: argparse.Namespace, site: Site, token: str) -> int
         websocket = await start_websocket(server, args.host, args.ws_port)
     except OSError as error:
         return _port_error("WebSocket", args.host, args.ws_port, error)
-    code = code_routes(site.classroom, server.is_admin_token, server.proxies, args.web_dir,
+    code = code_routes(site.classroom, server.is_admin_token, server.proxies,
                        submit_limits(args))
     try:
         http = await start_http(

@@ -36,6 +36,7 @@ from typing import Any
 
 from grading import load_suite
 from physics import ConfigError
+from websim.node_roslib import LOCK_FILE, has_roslib, roslib_closure
 from websim.sandbox import SandboxUnavailableError, find_tools
 
 log = logging.getLogger("websim.submissions")
@@ -135,8 +136,9 @@ class Grader:
     """Grades a submission with ``websim grade``, through its command line.
 
     Args:
-        roslib_modules: the folder holding roslib 1.4.1 and its dependencies
-            (``web-interface/node_modules``): a JavaScript submission gets a copy of them.
+        roslib_modules: the folder holding roslib 1.4.1 and its dependencies with npm's
+            record of them (``websim.node_roslib.roslib_modules()``: a checkout's, or the
+            wheel's), of which a JavaScript submission gets a copy; None: there is none.
         python: the interpreter that runs ``websim grade`` (this one) and, found first on the
             grading's PATH, the student's Python (it has roslibpy).
         node: Node's path (None: not installed).
@@ -144,7 +146,7 @@ class Grader:
             (never from ``websim serve``).
     """
 
-    def __init__(self, roslib_modules: Path, python: str = sys.executable,
+    def __init__(self, roslib_modules: Path | None, python: str = sys.executable,
                  node: str | None = None, sandboxed: bool = True) -> None:
         self.roslib_modules = roslib_modules
         self.python = python
@@ -166,11 +168,11 @@ class Grader:
         if language == "javascript":
             if self.node is None:
                 return "Node is not installed on this server, so JavaScript is not graded here"
-            if not (self.roslib_modules / "roslib" / "package.json").is_file() or \
-                    not (self.roslib_modules / ".package-lock.json").is_file():
-                return ("roslib's Node package is not installed on this server (a checkout "
-                        "after npm ci in web-interface/ has it; an installed wheel carries "
-                        "only the page's build of it), so JavaScript is not graded here")
+            if self.roslib_modules is None or not has_roslib(self.roslib_modules) or \
+                    not (self.roslib_modules / LOCK_FILE).is_file():
+                return ("roslib's Node package is not installed on this server (a wheel "
+                        "carries it; a checkout has it after npm ci in web-interface/), so "
+                        "JavaScript is not graded here")
         return None
 
     def time_limit_s(self, assignment: str) -> float:
@@ -261,20 +263,6 @@ def write_submission(folder: Path, language: str, text: str,
             shutil.copytree(roslib_modules / name, folder / "node_modules" / name,
                             dirs_exist_ok=True)
     return path
-
-
-def roslib_closure(modules: Path) -> list[str]:
-    """The packages roslib needs, itself included, by npm's lock (``.package-lock.json``)."""
-    lock = json.loads((modules / ".package-lock.json").read_text())["packages"]
-    names: list[str] = []
-    todo = ["roslib"]
-    while todo:
-        name = todo.pop()
-        if name in names or f"node_modules/{name}" not in lock:
-            continue
-        names.append(name)
-        todo.extend(lock[f"node_modules/{name}"].get("dependencies", {}))
-    return sorted(names)
 
 
 def read_results(out: Path, summary: dict[str, Any], limits: SubmitLimits

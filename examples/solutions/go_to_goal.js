@@ -8,7 +8,7 @@
 // facing x), plans a path on the robot's /map (latched occupancy grid: breadth-first search,
 // 8-connected, over the cells at least CLEARANCE_M from any wall), then follows it (pure
 // pursuit: steer at the path point LOOKAHEAD_M ahead), answering every /odom with one
-// /cmd_vel. The submission holds its node_modules (`npm install roslib@1.4.1` in its folder).
+// /cmd_vel. `websim grade` gives it roslib 1.4.1; elsewhere, `npm install roslib@1.4.1` here.
 'use strict';
 
 const ROSLIB = require('roslib');

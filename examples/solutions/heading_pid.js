@@ -6,8 +6,8 @@
 // to the heading at the start: the odom frame) and holds it, answering every /odom with one
 // /cmd_vel (a callback, not a timer), so `websim grade` can run it in deterministic mode.
 // WEBSIM_SETPOINT_RAD_CHANGES (`at_s:value` pairs) applies at the first /odom whose time since
-// the start reaches it; WEBSIM_KP overrides the gain (default 4 rad/s per rad). The submission
-// holds its node_modules (`npm install roslib@1.4.1` in its folder).
+// the start reaches it; WEBSIM_KP overrides the gain (default 4 rad/s per rad). `websim grade`
+// gives it roslib 1.4.1; elsewhere, `npm install roslib@1.4.1` in its folder.
 'use strict';
 
 const ROSLIB = require('roslib');

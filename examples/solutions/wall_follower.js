@@ -10,7 +10,7 @@
 //   angular = side k_d (d - d*) + k_a (bearing - side pi/2),   side = +1 left, -1 right
 //
 // from the latest /scan, answering every /odom with one /cmd_vel (a callback, not a timer).
-// The submission holds its node_modules (`npm install roslib@1.4.1` in its folder).
+// `websim grade` gives it roslib 1.4.1; elsewhere, `npm install roslib@1.4.1` in its folder.
 'use strict';
 
 const ROSLIB = require('roslib');
