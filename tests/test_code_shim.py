@@ -329,9 +329,10 @@ def test_timers_run_while_the_program_waits(loop: Any) -> None:
     started = time.monotonic()
     loop.call_later(0.2, lambda: fired.append(time.monotonic() - started))
     time.sleep(0.1)
-    assert fired == []
+    assert all(at_s >= 0.2 for at_s in fired)  # never early (a loaded machine sleeps longer)
     time.sleep(0.3)
-    assert len(fired) == 1 and 0.2 <= fired[0] < 0.35
+    # it fired while the program slept, once, not before its time (how late: the machine's load)
+    assert len(fired) == 1 and fired[0] >= 0.2
 
 
 def test_a_negative_sleep_is_refused_as_cpython_refuses_it(loop: Any) -> None:

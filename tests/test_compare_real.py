@@ -24,6 +24,7 @@ from rosbags.typesys import Stores, get_typestore
 from physics import load_params
 from physics.recorded_run import RecordedRun, on_grid
 from websim.cli import main
+from websim.real_recording import read_recording
 
 from recorded_runs import EXCITING_PROGRAM, record_program
 
@@ -247,8 +248,13 @@ def test_no_messages_in_the_window(recordings, tmp_path, capsys):
     err = refused(capsys, tmp_path, recordings["known"], "--start", "500")
     assert "no /odom messages in the window 500 s to the end" in err
     assert "spans 0.000 to" in err
-    err = refused(capsys, tmp_path, recordings["known"], "--start", "0.2", "--end", "0.5")
-    assert "no /cmd_vel messages in the window 0.2 s to 0.5 s" in err
+    # a window between the program's first two commands (when the first arrives after the
+    # recording's start depends on the machine's load: the window is read from the bag)
+    first, second = read_recording(recordings["known"]).run.command_times_s[:2]
+    start_s = round(first + 0.25 * (second - first), 3)
+    end_s = round(first + 0.75 * (second - first), 3)
+    err = refused(capsys, tmp_path, recordings["known"], "--start", start_s, "--end", end_s)
+    assert f"no /cmd_vel messages in the window {start_s:g} s to {end_s:g} s" in err
 
 
 def restamped(bag: Path, destination: Path, *, back_at: int | None = None,

@@ -95,6 +95,10 @@ def test_a_client_receives_every_recorded_message_in_order(replay: ServerProcess
     assert health["speed"] == 4 and health["replay"] == "alice"
     assert health["duration_s"] == pytest.approx(
         (recorded[-1].log_time_ns - recorded[0].log_time_ns) / 1e9, abs=1e-3)
+    # "finished" is the replay's; its last frames may still be on their way to this client
+    last_odom = [r.message for r in recorded if r.topic == "/odom"][-1]
+    wait_for(lambda: received["/odom"] and received["/odom"][-1]["header"] == last_odom["header"],
+             timeout_s=10, what="the last recorded /odom to reach the client")
     client.close()
     # the latched topics reach a client that subscribed after they were published
     for topic in ("/world", "/tf_static"):
