@@ -305,7 +305,9 @@ async function main() {
   window.addEventListener('pageshow', (event) => {
     if (event.persisted && token) roots.connect();
   });
-  window.websim = { roots, robot, feed, grid, pollers, commands }; // for the console
+  window.websim = { // for the console
+    roots, robot, feed, grid, pollers, commands, get arena() { return arena; },
+  };
 
   if (token) {
     connectWith(token);
