@@ -620,6 +620,17 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
                                 line[-1]]).rstrip() for line in lines)
 
 
+ARENA_WORLD = """\
+name: bench arena
+start: [0.0, 0.0, 0.0]
+polylines:
+  - points: [[-10, -10], [10, -10], [10, 10], [-10, 10]]
+    closed: true
+"""
+"""The arena of ``--arena``: a 20 x 20 m box (bench_world.py's open box), every robot of the
+class in it, placed by the server so that no two footprints overlap."""
+
+
 def run_setup(kind: str, n_robots: int, seconds: float, warmup_s: float,
               log_dir: Path, workers: int = 2) -> dict[str, Any]:
     """Start the servers of one setup, measure, stop them; a failure is a row with ``error``."""
@@ -628,6 +639,12 @@ def run_setup(kind: str, n_robots: int, seconds: float, warmup_s: float,
         try:
             if kind == "one process":
                 server = stack.enter_context(running_server(log_dir, ["--class", str(n_robots)]))
+                setup = class_setup(server)
+            elif kind == "arena":
+                world = log_dir / "arena.yaml"
+                world.write_text(ARENA_WORLD)
+                server = stack.enter_context(running_server(
+                    log_dir, ["--class", str(n_robots), "--arena", "--world", str(world)]))
                 setup = class_setup(server)
             elif kind == "workers":
                 http_port, ws_port = free_port(), free_port()
@@ -716,6 +733,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=0, metavar="K",
                         help="also measure K `--worker` processes behind the real nginx "
                              "(websim nginx-config) for every N (default 0: not)")
+    parser.add_argument("--arena", action="store_true",
+                        help="also measure one `websim serve --class N --arena` (every robot "
+                             "in one 20 x 20 m world: they see each other) for every N")
     parser.add_argument("--json", action="store_true", help="print rows as JSON objects")
     args = parser.parse_args(argv)
     if any(n < 1 for n in args.robots) or args.search_max < 1:
@@ -733,6 +753,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         plan = [("one process", n) for n in args.robots]
         plan += [("separate", n) for n in args.robots if n <= args.compare_max]
         plan += [("workers", n) for n in args.robots if args.workers > 0]
+        plan += [("arena", n) for n in args.robots if args.arena]
         for kind, n_robots in plan:
             print(f"measuring {kind}, {n_robots} robots ...", file=sys.stderr, flush=True)
             results[kind, n_robots] = run_setup(kind, n_robots, args.seconds, args.warmup,
@@ -751,7 +772,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     titles = {"one process": "ONE `websim serve --class N`",
               "separate": "N separate single-robot `websim serve` processes",
               "workers": f"{args.workers} `websim serve --class N --worker` processes behind "
-                         "the real nginx (websim nginx-config)"}
+                         "the real nginx (websim nginx-config)",
+              "arena": "ONE `websim serve --class N --arena`: every robot in one world"}
     for kind, title in titles.items():
         rows = [row for (each, _), row in sorted(results.items()) if each == kind]
         if rows:
