@@ -11,13 +11,37 @@ controller's executor has handled everything of the tick (``ControllerGraph.deli
    ``/clock`` last, from one participant to the controller's;
 2. after each message of a topic the controller subscribes to, the grader calls a service of
    each controller node (``get_parameters`` with no names, which every rclpy node serves and
-   which changes nothing) and waits for the answer. The request follows the message on the
-   same path, and rclpy's executor handles what one wait found in order (timers, then
-   subscriptions, then services): the answer means the message's callback has run (and
-   published its ``/cmd_vel``, which the robot has by then: its subscription is handled
-   before the answer in the grader's own executor). After ``/clock`` it calls twice: the
-   first answer means the node took the tick's time, which makes its timers due then ready;
-   the second request is answered only after those timers ran.
+   which changes nothing) and waits for the answer, ``CONFIRMING_CALLS`` times one after the
+   other (once more after ``/clock``). The last answer means the message's callback has run
+   (and published its ``/cmd_vel``, which the robot has by then: it was sent before the
+   answer, usually a round trip before).
+
+Why more than one call. The message and the request come from two writers of the grader's
+one participant over one UDP path (the run's network namespace), and even when they arrive in
+that order the controller's executor may take the request first: rmw_fastrtps's wait looks at
+the subscriptions' conditions, then the services', one after the other, and when both arrive
+between those two looks (the controller's thread descheduled there, which a loaded machine
+does) that wait finds only the request, and the node answers before the message's callback
+has run. The message is queued by then, so the next wait finds it; and rclpy's executor
+handles what one wait found in order (timers, subscriptions, ..., services). The second
+request is sent only once the first is answered, so it is answered after the message's
+callback. After ``/clock`` a third: by the second answer the node has taken the tick's time,
+which makes its timers due, and ready in its next wait; the third request is answered only
+after they ran.
+
+Measured under load (two CPU burners, a disk writer, an rclpy flood and the test suite on 2
+cores), with the wall follower on a 478-tick corridor and an executor that counts the requests
+it takes before each callback: one call per message let a callback run after its answer in 3
+of 18 runs (5 of about 26,000 messages); two one after the other, in none of 27. They cost
+the six-scenario suite (rclpy wall follower, side by side) 1.03x to 1.46x its wall time;
+sending the two at once costs less (1.1x to 1.2x) and had no violation in 18 runs, but leaves no
+margin: a message overtaken by both requests, or a ``/cmd_vel`` by the last answer.
+One transport for both (``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` for the controller too;
+rmw_fastrtps publishes synchronously by default) left the race as it was (3 of 18 runs), and
+so did waiting for the reader's acknowledgement before one call (``wait_for_all_acked``: a
+best-effort ``/scan`` reader sends none; 2 of 6 runs).
+What can still race: a message held back in transport for more than a round trip (a
+retransmission, say; not seen in those runs), which no answer can tell apart.
 
 So every tick the controller sees the same messages in the same order, one callback at a
 time, and its commands apply at the same tick, whatever the machine's load: a re-grade is
@@ -52,6 +76,10 @@ from rosbridge.graph.names import RELAY_NODE_NAME
 
 OUR_NODES = frozenset({("/", NODE_BASENAME), ("/", RELAY_NODE_NAME)})
 """The simulator's nodes on the run's graph: (namespace, name)."""
+
+CONFIRMING_CALLS = 2
+"""Handshake calls after each message, one after the other (one more after ``/clock``): the
+first may be answered before the message's callback, the second cannot (module docstring)."""
 
 HANDSHAKE_SERVICE = "get_parameters"
 """The service of a controller node the handshake calls: every rclpy (and rclcpp) node has
@@ -185,8 +213,8 @@ class ControllerGraph:
         for topic, publish in held:
             publish()
             if answered and topic in self.served:
-                rounds = 2 if topic == CLOCK.name else 1
-                for _ in range(rounds):
+                calls = CONFIRMING_CALLS + (topic == CLOCK.name)
+                for _ in range(calls):
                     answered = answered and await self.round_trip(timeout_s)
         return answered
 
