@@ -345,7 +345,9 @@ def twist_from_msg(msg: Any, stamped: bool = False) -> tuple[float, float]:
     for name, part in (("linear", linear), ("angular", angular)):
         for axis in ("x", "y", "z"):
             if axis in part:
-                as_finite_float(f"{name}.{axis}", part[axis])
+                value = part[axis]
+                if type(value) is not float or not math.isfinite(value):  # else: fine
+                    as_finite_float(f"{name}.{axis}", value)
     return (as_finite_float("linear.x", linear.get("x", 0.0)),
             as_finite_float("angular.z", angular.get("z", 0.0)))
 

@@ -206,11 +206,35 @@ def parse_json(text: str | bytes) -> Any:
         if elements > MAX_ELEMENTS:
             raise ValueError(f"too many elements ({elements}; at most {MAX_ELEMENTS} "
                              "values, objects and arrays)")
-    message = json.loads(text)
+    message = _loads(text)
     probe = text if isinstance(text, str) else text.decode("utf-8", "replace")
     if _SURROGATE_ESCAPE.search(probe):
         _refuse_lone_surrogates(message)
     return message
+
+
+_DIGITS_AS_ZERO = bytes(48 if byte in b"0123456789" else 32 for byte in range(256))
+"""A ``bytes.translate`` table: every digit a ``0``, every other byte a blank."""
+
+_LONG_NUMBER = b"0" * 19
+"""19 digits in a row: perhaps an integer beyond 64 bits, which orjson reads as a float."""
+
+
+def _loads(text: str | bytes) -> Any:
+    """``json.loads(text)``, by orjson where it gives the same (about 4 times faster).
+
+    orjson reads a JSON text as the standard library does, except that it refuses ``NaN``,
+    ``Infinity``, numbers beyond float range and lone surrogates (the standard library then
+    reads the text, or gives its reason) and reads integers beyond 64 bits as floats (a text
+    with 19 digits in a row goes to the standard library).
+    """
+    data = text.encode("utf-8", "surrogatepass") if isinstance(text, str) else text
+    if _LONG_NUMBER not in data.translate(_DIGITS_AS_ZERO):
+        try:
+            return orjson.loads(data)
+        except orjson.JSONDecodeError:
+            pass  # the standard library's reading, or its reason
+    return json.loads(text)
 
 
 def _refuse_lone_surrogates(value: Any) -> None:

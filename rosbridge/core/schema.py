@@ -12,6 +12,7 @@ other fields the message has.
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -267,6 +268,12 @@ def read_operation(frame: str | bytes, parse: Callable[[str], Any]) -> tuple[str
 NAME_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
+RESOLVED_NAMES = 1024
+"""Names resolved kept for reuse (a client sends the same few with every message): at most
+about 0.5 MB of names (``MAX_NAME_CHARS``); a refused name is never kept."""
+
+
+@functools.lru_cache(maxsize=RESOLVED_NAMES)
 def resolve_name(name: str, namespace: str = "/") -> str:
     """A topic or service name resolved as ROS 2 resolves it for a node in ``namespace``.
 

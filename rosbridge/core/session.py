@@ -121,8 +121,14 @@ class Flush:
         return Flush(self.now + other.now, self.later + other.later)
 
 
+NOTHING = Flush()
+"""The flush of a call that queued nothing (most of a tick's: one made once)."""
+
+
 def take_flush(ready: Ready, closing: Ready | None = None) -> Flush:
     """Empty ``ready`` (and ``closing``, the clients closing a loop among them) into a Flush."""
+    if not ready and not closing:
+        return NOTHING
     if closing:
         flush = Flush(tuple(closing), tuple(s for s in ready if s not in closing))
         closing.clear()

@@ -192,6 +192,11 @@ def canonical(type_name: str, msg: Any, *, graph: bool = False) -> dict[str, Any
             it; the reason names the field (``linear.x: expected a number, got str``).
     """
     if known(type_name):
+        shape = _float_tree(type_name)
+        if shape is not None:
+            plain = _plain_floats(shape, msg)
+            if plain is not None:
+                return plain
         return _message(type_name, msg, type_name, 0)
     check_type(type_name, graph=graph)
     from rosbridge.msgs.rclpy_conversion import (
@@ -218,6 +223,49 @@ def _layout(type_name: str) -> tuple[tuple[tuple[str, Any], ...], frozenset[str]
     definition = tuple((name, kind) for name, kind in _fielddefs()[type_name][1]
                        if name != EMPTY_PLACEHOLDER)
     return definition, frozenset(name for name, _ in definition)
+
+
+FloatTree = tuple[tuple[str, "FloatTree | None"], ...]
+"""A type whose every field is a ``float64`` (None) or, nested, such a type."""
+
+
+@functools.cache
+def _float_tree(type_name: str, depth: int = 0) -> FloatTree | None:
+    """``type_name``'s fields as a ``FloatTree`` (Twist, Vector3, Pose...); None if not one."""
+    definition, _ = _layout(type_name)
+    if not definition or depth > MAX_DEPTH:
+        return None
+    shape: list[tuple[str, FloatTree | None]] = []
+    for name, (kind, detail) in definition:
+        if kind == Nodetype.BASE and detail[0] == "float64":
+            shape.append((name, None))
+        elif kind == Nodetype.NAME and (nested := _float_tree(detail, depth + 1)) is not None:
+            shape.append((name, nested))
+        else:
+            return None
+    return tuple(shape)
+
+
+def _plain_floats(shape: FloatTree, msg: Any) -> dict[str, Any] | None:
+    """``msg`` in canonical form if it is already: every field, in order, each a float.
+
+    The common message (a Twist from any client) is then checked without the general
+    path's reasons and defaults; None: not so (``_message`` checks it and says why).
+    """
+    if type(msg) is not dict or len(msg) != len(shape):
+        return None
+    out: dict[str, Any] = {}
+    for (name, nested), key in zip(shape, msg, strict=True):
+        if name != key:
+            return None
+        value = msg[key]
+        if nested is None:
+            if type(value) is not float:
+                return None
+        elif (value := _plain_floats(nested, value)) is None:
+            return None
+        out[name] = value
+    return out
 
 
 def _message(type_name: str, msg: Any, where: str, depth: int) -> dict[str, Any]:

@@ -205,7 +205,7 @@ class BridgeConnection:
             return
         if self._backed_up.is_set():
             return
-        if self._encoding_wait_s() > 0 and outbox.has_deferred():
+        if outbox.has_deferred() and self._encoding_wait_s() > 0:  # the cheaper test first
             outbox.behind = True  # its costly formats wait for its budget, in its writer
             self._backed_up.set()
             self._writers.release([outbox])  # its own lateness: the ticks do not wait for it

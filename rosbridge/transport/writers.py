@@ -82,6 +82,8 @@ class Writers:
 
         Clients of no connection here (a test's sessions) are skipped.
         """
+        if not flush:
+            return
         writers = self._writers
         for session in flush.now:
             write = writers.get(session.outbox)

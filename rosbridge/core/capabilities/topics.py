@@ -461,7 +461,8 @@ class Topics:
 
     def _wants(self, subscription: Subscription, topic: str, encoded: Encoded) -> bool:
         """Whether a subscriber gets ``encoded``: on a topic of several types, only its own."""
-        if encoded.type_name is None or len(self._local_types(topic)) < 2:
+        local = self._local.get(topic)
+        if encoded.type_name is None or local is None or len(local) < 2:
             return True
         return (subscription.type_name or self._types.get(topic)) == encoded.type_name
 
@@ -577,9 +578,10 @@ class Topics:
         any, then queues them for the clients that only watch. ``now_s``: the time throttles
         measure against (default: the clock).
         """
-        for encoded in messages:
-            for listener in tuple(self._listeners.get(encoded.topic, ())):
-                self._hear(encoded.topic, listener, encoded.envelope["msg"])
+        if self._listeners:
+            for encoded in messages:
+                for listener in tuple(self._listeners.get(encoded.topic, ())):
+                    self._hear(encoded.topic, listener, encoded.envelope["msg"])
         now = self._context.clock.monotonic_s() if now_s is None else now_s
         audiences = [(encoded, subscribers) for encoded in messages
                      if (subscribers := self._subscribers.get(encoded.topic))]
