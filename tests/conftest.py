@@ -20,6 +20,15 @@ ARENA_HALF_M = 3.0
 """worlds/empty.yaml is the closed square |x|, |y| <= 3 m."""
 
 
+@pytest.fixture(autouse=True)
+def no_server_outlives_its_test() -> Iterator[None]:
+    """A server a test's body started is gone when the test is, passed or failed."""
+    yield
+    from server_process import stop_leftovers
+
+    stop_leftovers()
+
+
 @pytest.fixture
 def arena() -> World:
     return load_world("empty")

@@ -77,6 +77,21 @@ class ServerProcess:
         return stop_process(self.process, self.output, signal.SIGTERM, timeout_s)
 
 
+STARTED_BY_TESTS: list[ServerProcess] = []
+"""Servers a test's body started (not a fixture's): ``stop_leftovers`` ends those still running
+after their test, so a test that fails before its ``stop()`` leaves no server behind (one at
+``--speed max --record`` once ran on for half an hour, two cores busy, under the next tests)."""
+
+
+def stop_leftovers() -> int:
+    """Stop every server a test's body started and left running; how many there were."""
+    left = [server for server in STARTED_BY_TESTS if server.process.poll() is None]
+    STARTED_BY_TESTS.clear()
+    for server in left:
+        stop_process(server.process, server.output, signal.SIGKILL, timeout_s=5.0)
+    return len(left)
+
+
 def stop_process(process: subprocess.Popen[str], output: list[str], signum: int,
                  timeout_s: float = 10.0) -> int:
     """Send ``signum``, wait up to ``timeout_s`` (then kill), keep the output; exit code."""
@@ -121,6 +136,8 @@ def start_server(extra_args: Sequence[str] = (), ws_port: int | None = None,
                                                    prefix="websim-data-")},
                                preexec_fn=preexec, cwd=cwd)
     server = ServerProcess(ws_port, http_port, process)
+    if os.environ.get("PYTEST_CURRENT_TEST", "").endswith("(call)"):  # a test's own server
+        STARTED_BY_TESTS.append(server)
 
     def healthy() -> bool:
         if process.poll() is not None:
