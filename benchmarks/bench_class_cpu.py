@@ -14,6 +14,10 @@ connection writes it (``Outbox.take``, ``WireFrames``, one join per client and f
 What it leaves out: the event loop, websockets' reading of a frame, the budgets of the
 connection, the socket writes.
 
+With ``--arena`` every robot is in one world, as ``--class N --arena``. Each row also gives
+when a driver's frames of a tick were written, from the tick's start (p50 / p99 over
+every driver and tick): the part of the cmd_vel → odom latency the tick itself adds.
+
 With ``--against DIR`` (another checkout, e.g. ``git worktree add /tmp/base BASE``) it runs
 each checkout's code in turn, interleaved, ``--rounds`` times, each in a fresh process, and
 prints both and their ratio: how a change compares, measured side by side. It asserts
@@ -28,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 import statistics
 import subprocess
@@ -45,11 +50,15 @@ REPEATS = 5
 """Timed runs of ``--ticks`` / REPEATS ticks each; the best and the median are reported."""
 
 
-def measure(robots: int, ticks: int) -> dict[str, Any]:
-    """CPU time per tick of ``robots`` driven robots in this process (``PYTHONPATH``'s code)."""
+def measure(robots: int, ticks: int, arena: bool = False) -> dict[str, Any]:
+    """CPU time per tick of ``robots`` driven robots in this process (``PYTHONPATH``'s code).
+
+    With ``arena``, every robot is in one "empty" world (``websim serve --class N --arena``:
+    a crowd around its start) instead of each in its own.
+    """
     logging.disable(logging.CRITICAL)
     from heartbeat.driver import TickDriver
-    from physics import Simulation, load_world
+    from physics import Simulation, WorldSim, load_world
     from ros_nodes.robot_interface import CMD_VEL, ODOM, SCAN, TF
     from ros_nodes.virtual_robot_core import VirtualRobot
     from ros_nodes.world_host import WorldHost
@@ -63,9 +72,17 @@ def measure(robots: int, ticks: int) -> dict[str, Any]:
     wire = WireFrames()
     written = [0, 0]  # bytes, writes
     worlds, drivers = [], []
+    shared = WorldHost(WorldSim(load_world("empty"), seed=0)) if arena else None
+    written_at: dict[int, float] = {}  # a driver's session -> when its tick's frames left
+    tick_started = [0.0]
     for index in range(robots):
-        sim = Simulation(load_world("empty"), seed=index)
-        world, host = WorldHost.of(VirtualRobot(sim, clock))
+        if shared is not None:
+            shared.world.spawn(f"robot{index}")
+            host = shared.add(VirtualRobot(Simulation.of(shared.world, f"robot{index}"), clock))
+            world = shared
+        else:
+            sim = Simulation(load_world("empty"), seed=index)
+            world, host = WorldHost.of(VirtualRobot(sim, clock))
         driver = Session(f"10.0.{index // 250}.{index % 250}:5000", True, limits=limits,
                          clock=clock)
         host.bridge.connect(driver)
@@ -77,7 +94,8 @@ def measure(robots: int, ticks: int) -> dict[str, Any]:
         host.bridge.connect(dashboard)
         host.bridge.handle(dashboard, json.dumps({"op": "subscribe", "topic": ODOM.name,
                                                   "throttle_rate": 200}))
-        worlds.append(world)
+        if world not in worlds:
+            worlds.append(world)
         drivers.append((host.bridge, driver))
 
     def write(flush: Flush) -> None:
@@ -87,10 +105,12 @@ def measure(robots: int, ticks: int) -> dict[str, Any]:
                 data = b"".join(frames)
                 written[0] += len(data)
                 written[1] += 1
+                written_at.setdefault(id(session), time.perf_counter() - tick_started[0])
 
     tick_driver = TickDriver(clock=clock)
     tick_driver.write = write  # type: ignore[method-assign]  # no sockets: drained here
     sent = [0]
+    delays_ms: list[float] = []
 
     def tick() -> None:
         clock.advance(TICK_S)
@@ -101,11 +121,16 @@ def measure(robots: int, ticks: int) -> dict[str, Any]:
                     "linear": {"x": 0.2 + 1e-6 * sent[0], "y": 0.0, "z": 0.0},
                     "angular": {"x": 0.0, "y": 0.0, "z": 0.1}}})
                 write(bridge.handle(driver, frame))
+        written_at.clear()
+        tick_started[0] = time.perf_counter()
         tick_driver.tick(worlds)
+        delays_ms.extend(1e3 * written_at.get(id(driver), math.nan)
+                         for _, driver in drivers)
 
     for _ in range(20):  # warm-up: every topic flowing
         tick()
     written[:] = [0, 0]
+    delays_ms.clear()
     per_tick_s = []
     for _ in range(REPEATS):
         started = time.process_time()
@@ -117,14 +142,25 @@ def measure(robots: int, ticks: int) -> dict[str, Any]:
             "robot_pct_best": 100 * best / TICK_S / robots,
             "robot_pct_median": 100 * median / TICK_S / robots,
             "bytes_per_tick": written[0] / (REPEATS * max(1, ticks // REPEATS)),
-            "writes_per_tick": written[1] / (REPEATS * max(1, ticks // REPEATS))}
+            "writes_per_tick": written[1] / (REPEATS * max(1, ticks // REPEATS)),
+            "driver_written_p50_ms": percentile(delays_ms, 50),
+            "driver_written_p99_ms": percentile(delays_ms, 99)}
 
 
-def run_child(checkout: Path, robots: int, ticks: int) -> dict[str, Any]:
+def percentile(values: list[float], pct: float) -> float:
+    """The ``pct`` percentile of the finite ``values`` (nan if none)."""
+    finite = sorted(value for value in values if math.isfinite(value))
+    if not finite:
+        return math.nan
+    return finite[min(len(finite) - 1, int(pct / 100 * len(finite)))]
+
+
+def run_child(checkout: Path, robots: int, ticks: int, arena: bool) -> dict[str, Any]:
     """``measure`` in a fresh process running ``checkout``'s code."""
     env = {**os.environ, "PYTHONPATH": str(checkout)}
     done = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child",
-                           "--robots", str(robots), "--ticks", str(ticks)],
+                           "--robots", str(robots), "--ticks", str(ticks),
+                           *(["--arena"] if arena else [])],
                           cwd=checkout, env=env, capture_output=True, text=True, check=False,
                           timeout=1800)
     if done.returncode != 0:
@@ -140,27 +176,32 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--against", type=Path, default=None, metavar="DIR",
                         help="another checkout to measure interleaved with this one")
     parser.add_argument("--rounds", type=int, default=2, help="rounds with --against (2)")
+    parser.add_argument("--arena", action="store_true",
+                        help="every robot in one world (--class N --arena)")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
-        print(json.dumps(measure(args.robots[0], args.ticks)))
+        print(json.dumps(measure(args.robots[0], args.ticks, args.arena)))
         return 0
     checkouts = [("this", PROJECT_DIR)]
     if args.against is not None:
         checkouts.insert(0, ("against", args.against.resolve()))
     rounds = args.rounds if args.against is not None else 1
     print(f"{'robots':>6} {'round':>5} {'code':>8} {'tick ms best/median':>20} "
-          f"{'% of a core per robot':>22} {'kB/tick':>8} {'writes/tick':>11}")
+          f"{'% of a core per robot':>22} {'kB/tick':>8} {'writes/tick':>11} "
+          f"{'written p50/p99 ms':>19}")
     results: dict[tuple[int, str], list[dict[str, Any]]] = {}
     for robots in args.robots:
         for number in range(1, rounds + 1):
             for name, checkout in checkouts:
-                row = run_child(checkout, robots, args.ticks)
+                row = run_child(checkout, robots, args.ticks, args.arena)
                 results.setdefault((robots, name), []).append(row)
                 print(f"{robots:>6} {number:>5} {name:>8} "
                       f"{row['tick_ms_best']:>9.2f} / {row['tick_ms_median']:<8.2f} "
                       f"{row['robot_pct_best']:>10.3f} / {row['robot_pct_median']:<9.3f} "
-                      f"{row['bytes_per_tick'] / 1e3:>8.1f} {row['writes_per_tick']:>11.1f}",
+                      f"{row['bytes_per_tick'] / 1e3:>8.1f} {row['writes_per_tick']:>11.1f} "
+                      f"{row['driver_written_p50_ms']:>9.2f} / "
+                      f"{row['driver_written_p99_ms']:<7.2f}",
                       flush=True)
         if args.against is not None:
             mine = [row["tick_ms_best"] for row in results[(robots, "this")]]

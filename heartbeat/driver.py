@@ -4,8 +4,9 @@ Nothing else ticks. A tick of a set of worlds is::
 
     commands (already applied as they came in)
       -> each world's one step for all its robots           (WorldHost.begin_tick)
+      -> a crowded world's /odom and /tf out                 (WorldHost.end_tick, scans=False)
       -> one scan pass for every robot of those worlds due   (physics.simulation.cast_scans)
-      -> each robot's endpoint builds and delivers           (WorldHost.end_tick)
+      -> each robot's endpoint builds and delivers the rest  (WorldHost.end_tick)
       -> the flushes written through the loop's connections  (Writers)
 
 Paces (``heartbeat.schedule.Schedule``). At up to real time every world keeps one pace, the
@@ -218,6 +219,11 @@ class TickDriver:
         the shared scan pass is recorded on every robot in it, each then casting its own.
         """
         stepped = [world for world in worlds if world.begin_tick(lateness_s)]
+        crowded = {world for world in stepped if world.crowded}
+        write = self.write
+        for world in stepped:  # a crowded world's /odom and /tf do not wait for the scans
+            if world in crowded:
+                world.end_tick(write, lateness_s, scans=False)
         due = [sim for world in stepped for sim in world.scans_due(lateness_s)]
         if len(due) > 1:
             try:
@@ -227,9 +233,8 @@ class TickDriver:
                     for _, host in world:
                         if host.robot.sim in due:
                             host.faults.record("casting the tick's scans together", error)
-        write = self.write
         for world in stepped:
-            world.end_tick(write, lateness_s)
+            world.end_tick(write, lateness_s, scans=True if world in crowded else None)
 
     def write(self, flush: Flush) -> None:
         """Write ``flush`` through the loop's connections (the loop closers at once)."""

@@ -43,6 +43,15 @@ DENSE_MAX_PAIRS = 64
 """Up to this many (laser, shape) pairs every beam is tried on every shape (``_dense``);
 beyond, only the beams of each shape's arc (fewer numpy calls against fewer products)."""
 
+CULL_MIN_BEAMS = 20_000
+"""Above this many (laser, beam, disc) triples the discs are cast nearest first, and a disc
+hidden behind nearer hits is left out (``_discs``); below, every triple is cheaper than the
+bookkeeping."""
+
+NEAR_DISCS = (4, 12)
+"""The tiers of each laser's discs by nearness: its 4 nearest are cast, then of its next 8 the
+ones not hidden behind what those hit, then of the rest the ones still not hidden."""
+
 WIDE_ARC_RAD = math.pi - 1e-6
 """A wall whose arc is this wide (the laser on its line, between its ends) is tried on every
 beam: which half of the turn it covers is not decidable from its ends' directions."""
@@ -293,7 +302,16 @@ def _discs(ranges: FloatArray, origins: FloatArray, cos_t: FloatArray, sin_t: Fl
            headings: FloatArray, beam_cos: FloatArray, beam_sin: FloatArray,
            angle_min_rad: float, increment_rad: float, range_max_m: float,
            centre: FloatArray, radius: FloatArray, skip: IntArray | None) -> None:
+    """Every laser's beams on the discs in its reach, nearest first where they are many.
+
+    In a crowd most discs are hidden behind nearer ones: with more than ``CULL_MIN_BEAMS``
+    (laser, beam, disc) triples, each laser's ``NEAR_DISCS`` nearest discs are cast first, and
+    a farther disc only if some beam of its arc still reads beyond its nearest point (``gap``,
+    the least distance a beam can hit it at). A disc left out could only have given longer
+    distances than those read, so the ranges are the same, to the bit.
+    """
     count = len(beam_cos)
+    lasers = len(origins)
     to_x = centre[None, :, 0] - origins[:, 0, None]  # lasers x discs
     to_y = centre[None, :, 1] - origins[:, 1, None]
     reach = range_max_m + radius[None, :]
@@ -312,15 +330,81 @@ def _discs(ranges: FloatArray, origins: FloatArray, cos_t: FloatArray, sin_t: Fl
     lo = np.arctan2(wy, wx) - half - headings[laser]
     first, spans = _arc_beams(lo, 2.0 * half, angle_min_rad, increment_rad, count)
     spans = np.where(inside, count, spans)
-    arc, beam = _expand(first, spans, count)
-    pair_laser = laser[arc]
-    dx, dy = _directions(pair_laser, beam, cos_t, sin_t, beam_cos, beam_sin)
-    cx, cy, rr = wx[arc], wy[arc], r[arc]
-    along = cx * dx + cy * dy
-    outside = cx * cx + cy * cy - rr * rr
-    discriminant = along * along - outside
-    t = along - np.sqrt(np.maximum(discriminant, 0.0))
-    within = outside <= 0.0
-    t = np.where(within, 0.0, t)
-    hit = within | ((discriminant >= 0.0) & (t >= 0.0))
-    np.minimum.at(ranges, pair_laser[hit] * count + beam[hit], t[hit])
+    dir_x = cos_t[:, None] * beam_cos - sin_t[:, None] * beam_sin  # lasers x beams
+    dir_y = sin_t[:, None] * beam_cos + cos_t[:, None] * beam_sin
+    pairs = _DiscPairs(laser, wx, wy, r, first, spans, dir_x.ravel(), dir_y.ravel(), count)
+    if int(spans.sum()) <= CULL_MIN_BEAMS:
+        pairs.cast(ranges, slice(None))
+        return
+    gap = d - r
+    per_laser = np.full((lasers, len(radius)), np.inf)
+    per_laser[laser, disc] = gap
+    order = np.argsort(per_laser, axis=1)
+    rank = np.empty_like(order)
+    np.put_along_axis(rank, order, np.arange(len(radius))[None, :], axis=1)
+    pair_rank = rank[laser, disc]
+    tier_lo = 0
+    for tier_hi in (*NEAR_DISCS, len(radius)):
+        tier = np.nonzero((pair_rank >= tier_lo) & (pair_rank < tier_hi))[0]
+        if tier_lo and len(tier):
+            seen = _arc_max(ranges.reshape(lasers, count), laser[tier], first[tier], spans[tier])
+            tier = tier[seen >= gap[tier]]
+        pairs.cast(ranges, tier)
+        tier_lo = tier_hi
+
+
+@dataclass(frozen=True)
+class _DiscPairs:
+    """(laser, disc) pairs in reach: the disc's centre from the laser, its radius, its arc."""
+
+    laser: IntArray
+    wx: FloatArray
+    wy: FloatArray
+    r: FloatArray
+    first: IntArray
+    spans: IntArray
+    dir_x: FloatArray
+    """Every laser's beam directions in the map frame, (lasers * beams,)."""
+    dir_y: FloatArray
+    count: int
+
+    def cast(self, ranges: FloatArray, which: slice | IntArray | npt.NDArray[np.bool_]) -> None:
+        """Intersect the beams of the arcs of pairs ``which``; each beam keeps its nearest."""
+        spans = self.spans[which]
+        if not len(spans):
+            return
+        arc, beam = _expand(self.first[which], spans, self.count)
+        flat = self.laser[which][arc] * self.count + beam
+        dx, dy = self.dir_x[flat], self.dir_y[flat]
+        cx, cy, rr = self.wx[which][arc], self.wy[which][arc], self.r[which][arc]
+        along = cx * dx + cy * dy
+        outside = cx * cx + cy * cy - rr * rr
+        discriminant = along * along - outside
+        t = along - np.sqrt(np.maximum(discriminant, 0.0))
+        within = outside <= 0.0
+        t = np.where(within, 0.0, t)
+        hit = within | ((discriminant >= 0.0) & (t >= 0.0))
+        np.minimum.at(ranges, flat[hit], t[hit])
+
+
+def _arc_max(ranges: FloatArray, laser: IntArray, first: IntArray, spans: IntArray) -> FloatArray:
+    """The longest range over each arc: beams ``first`` .. ``first + spans - 1`` (mod n).
+
+    A sparse table of maxima over the doubled rows (windows of 1, 2, 4, ... beams, up to the
+    widest arc), so each arc is two lookups whatever its width.
+    """
+    lasers, count = ranges.shape
+    level_of = np.log2(np.maximum(spans, 1)).astype(np.intp)  # floor: spans >= 1
+    levels = int(level_of.max()) + 1
+    table = np.empty((levels, lasers, 2 * count))
+    table[0, :, :count] = ranges
+    table[0, :, count:] = ranges
+    for level in range(1, levels):
+        width = 1 << (level - 1)
+        np.maximum(table[level - 1, :, :-width], table[level - 1, :, width:],
+                   out=table[level, :, :-width])
+        table[level, :, -width:] = np.inf  # past the row's end: never culls
+    flat = table.reshape(-1)
+    row = (level_of * lasers + laser) * (2 * count) + first
+    longest: FloatArray = np.maximum(flat[row], flat[row + spans - (1 << level_of)])
+    return longest

@@ -214,13 +214,15 @@ class RobotHost:
         return wanted is None or topic in wanted
 
     def end_tick(self, write: Write, lateness_s: float = 0.0,
-                 shared: Sequence[Publication] = ()) -> None:
+                 shared: Sequence[Publication] = (), scans: bool | None = None) -> None:
         """Build and deliver the messages of the tick just stepped; never raises.
 
         ``write`` has each flush written: the clients closing a loop first, before the
         watchers' frames are even queued. ``shared``: messages of the robot's world, built
         once for all its robots (``/world_robots``), delivered to its clients that want them
-        (the world's, not the robot's: its tap does not carry them).
+        (the world's, not the robot's: its tap does not carry them). ``scans``: only the
+        messages that read the LiDAR's scan (True), only the others (False), or all (None):
+        a crowded world sends every robot's /odom and /tf before its scan pass.
 
         Only messages some client subscribes to are built (for a ROS graph: all). A tick that
         starts half a period late builds no sheddable sensor's message (/scan): it is shed,
@@ -228,11 +230,15 @@ class RobotHost:
         """
         wanted = self._wanted()
         shed = lateness_s > SHED_SCANS_AFTER_S
-        sheddable = sum(sensor.sheddable for sensor in self.robot.due(wanted))
+        due = self.robot.due(wanted, scans)
+        if scans and not due:
+            return  # no scan of its this tick: the other part delivered everything
+        sheddable = sum(sensor.sheddable for sensor in due)
         if shed:
             self.stats.scans_shed += sheddable
         try:
-            publications = self.robot.publications(wanted, shed)
+            publications = (self.robot.publications(wanted, shed) if scans is None
+                            else self.robot.publications(wanted, shed, scans=scans))
         except Exception as error:  # the robot's boundary: record, recover, go on
             self.faults.record("stepping the robot", error)
             self.recover("building its messages failed")
@@ -248,6 +254,8 @@ class RobotHost:
                 write(flush)
         except Exception as error:  # the robot's boundary: record, go on
             self.faults.record(f"delivering {', '.join(name for name, _ in messages)}", error)
+        if scans:
+            return  # the tick's other part republished and expired
         try:
             self.tf_republisher.step(self._clock.monotonic_s() - lateness_s)
         except Exception as error:  # the robot's boundary: record, go on

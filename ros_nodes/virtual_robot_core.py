@@ -185,29 +185,35 @@ class VirtualRobot:
             self.collisions += 1
         self._colliding = collided
 
-    def due(self, wanted: Container[str] | None = None) -> list[Sensor]:
+    def due(self, wanted: Container[str] | None = None,
+            scans: bool | None = None) -> list[Sensor]:
         """The sensors due at the tick just advanced to whose topics are ``wanted``.
 
         Args:
             wanted: the topics some client subscribes to (None: all; a tap gets all).
+            scans: only the sensors that read the LiDAR's scan (True), only the others
+                (False), or all (None).
         """
         if self.tap.attached:
             wanted = None
         tick = self.sim.tick
         return [sensor for sensor in self.sensors
-                if sensor.due(tick) and (wanted is None or sensor.topic.name in wanted)]
+                if sensor.due(tick) and (wanted is None or sensor.topic.name in wanted)
+                and (scans is None or sensor.reads_scan == scans)]
 
     def publications(self, wanted: Container[str] | None = None,
-                     shed: bool = False) -> list[Publication]:
+                     shed: bool = False, scans: bool | None = None) -> list[Publication]:
         """The messages due at the tick just advanced to.
 
         Args:
             wanted: the topics whose messages to build (None: all; a tap gets all).
             shed: leave out the sheddable sensors (a late tick: /scan goes first).
+            scans: only the messages that read the LiDAR's scan (True), only the others
+                (False: the tick's /odom and /tf, out before its scan pass), or all (None).
         """
         now_s = self.clock.stamp_s()
         out: list[Publication] = [(sensor.topic, sensor.build(self.sim, now_s))
-                                  for sensor in self.due(wanted)
+                                  for sensor in self.due(wanted, scans)
                                   if not (shed and sensor.sheddable)]
         if self.tap.attached:
             time_s = self.sim.time_s

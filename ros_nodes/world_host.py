@@ -126,15 +126,27 @@ class WorldHost:
         """The robots stepped this tick whose messages will read their LiDAR's scan."""
         return [host.robot.sim for host in self._stepped if host.reads_scan(lateness_s)]
 
-    def end_tick(self, write: Write, lateness_s: float = 0.0) -> None:
+    @property
+    def crowded(self) -> bool:
+        """Whether its tick delivers in two parts (more than one robot stepped).
+
+        Every robot's /odom and /tf, then the scan pass, then the scans: in one part each
+        robot's /odom would wait for every robot's scan and the messages of those before it.
+        """
+        return len(self._stepped) > 1
+
+    def end_tick(self, write: Write, lateness_s: float = 0.0,
+                 scans: bool | None = None) -> None:
         """Each stepped robot builds and delivers its messages (``RobotHost.end_tick``).
 
-        The world's own message, ``/world_robots`` (every robot at this tick), is built once
-        for all its robots, if a client of one of them wants it.
+        ``scans``: only the messages that read the LiDAR's scan (True: after the scan pass),
+        only the others (False: before it), or all (None). The world's own message,
+        ``/world_robots`` (every robot at this tick), is built once for all its robots, if a
+        client of one of them wants it, and goes out with the others.
         """
-        shared = self._shared_publications()
+        shared = self._shared_publications() if not scans else []
         for host in self._stepped:
-            host.end_tick(write, lateness_s, shared)
+            host.end_tick(write, lateness_s, shared, scans)
 
     def _shared_publications(self) -> list[Publication]:
         if not any(host.wants(WORLD_ROBOTS.name) for host in self._stepped):
@@ -154,7 +166,10 @@ class WorldHost:
     def tick(self, write: Write, lateness_s: float = 0.0) -> None:
         """A whole tick of this world alone: step, its own scan pass, deliver."""
         if self.begin_tick(lateness_s):
+            crowded = self.crowded
+            if crowded:
+                self.end_tick(write, lateness_s, scans=False)
             due = self.scans_due(lateness_s)
             if len(due) > 1:
                 cast_scans(due)
-            self.end_tick(write, lateness_s)
+            self.end_tick(write, lateness_s, scans=True if crowded else None)
