@@ -36,6 +36,7 @@ import numpy as np
 import numpy.typing as npt
 import pymunk
 
+from physics import raycast
 from physics.geometry import WorldShapes
 from physics.params import LidarParams
 from physics.raycast import cast, cast_one
@@ -118,13 +119,15 @@ class Lidar:
     def raw_ranges(self, robot_pose: Pose2D, discs: FloatArray = NO_DISCS) -> FloatArray:
         """Distance to the first shape along each beam, +inf if none within range_max (m).
 
-        The walls and obstacles, and ``discs`` (other robots: rows of x, y, radius).
+        The walls and obstacles, and ``discs`` (other robots: rows of x, y, radius). Few
+        shapes (the maze): every beam on every shape in one product (``cast_one``); many:
+        only the beams of each shape's arc (``raw_ranges_many``).
         """
-        if len(discs):
+        shapes = self._shapes
+        if len(discs) or len(shapes.walls) + len(shapes.circle_radius) > raycast.DENSE_MAX_PAIRS:
             ranges: FloatArray = self.raw_ranges_many([robot_pose], discs)[0]
             return ranges
         laser = self.laser_pose(robot_pose)
-        shapes = self._shapes
         return cast_one(laser.x, laser.y, laser.theta, self.beam_cos, self.beam_sin,
                         self._params.range_max_m, shapes.walls, shapes.circle_centre,
                         shapes.circle_radius)
