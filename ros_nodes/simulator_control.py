@@ -14,6 +14,7 @@ along the heading) and ``omega`` (rad/s, counter-clockwise), as ``physics`` give
 from __future__ import annotations
 
 import dataclasses
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -208,7 +209,7 @@ class Spawner(Protocol):
         """Whether robot ``name`` was spawned while the world runs."""
 
 
-class WorldControl:
+class WorldControl(ABC):
     """A world's robots as the simulation services act on them: a ``WorldHost``.
 
     Stepping a paused world runs one tick of it after each tick of the server
@@ -269,12 +270,13 @@ class WorldControl:
             host.robot.reset()
 
     @property
+    @abstractmethod
     def paused(self) -> bool:
         """Whether the world is held."""
-        raise NotImplementedError
 
+    @abstractmethod
     def _hold(self, held: bool) -> None:
-        raise NotImplementedError
+        """Hold the world (True) or let it run."""
 
     @property
     def stopped(self) -> bool:
