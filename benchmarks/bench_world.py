@@ -15,7 +15,9 @@ then halving the gap: ``--search``).
 
 Worlds: ``open``, a 20 x 20 m box; ``walls``, the same box with 100 random walls (the maze's
 density of walls over a larger floor, as ``bench_physics.py`` makes them). Robots start on a
-grid of free places, 1 m apart or less.
+grid of free places, 1 m apart or less. ``arena`` (not run by default): the shipped 6 x 6 m
+``empty`` world with the robots packed around its start, as ``websim serve --class N --arena``
+places them: most robots a laser could see hide behind nearer ones.
 
 Run it from the checkout::
 
@@ -36,7 +38,7 @@ from importlib.metadata import version
 
 import numpy as np
 
-from physics import LidarParams, Pose2D, World, WorldSim
+from physics import LidarParams, Pose2D, World, WorldSim, load_world
 from physics.world import world_from_dict
 
 HALF_M = 10.0
@@ -64,9 +66,20 @@ def world_of(kind: str) -> World:
 
 
 def crowd(kind: str, robots: int) -> WorldSim:
-    """A world of ``robots`` robots on free places of a grid, each given a circle to drive."""
-    world = WorldSim(world_of(kind), seed=SEED, lidar=LidarParams())
+    """A world of ``robots`` robots on free places of a grid, each given a circle to drive.
+
+    ``arena``: the shipped 6 x 6 m ``empty`` world, each robot where ``serve --arena`` puts a
+    robot the world file does not place (the nearest free pose to the start: a packed crowd).
+    """
     rng = np.random.default_rng(SEED)
+    if kind == "arena":
+        world = WorldSim(load_world("empty"), seed=SEED, lidar=LidarParams())
+        for index in range(robots):
+            world.spawn(f"r{index}")
+        for name in world.names:
+            world.command(name, float(rng.uniform(0.05, 0.3)), float(rng.uniform(-1.0, 1.0)))
+        return world
+    world = WorldSim(world_of(kind), seed=SEED, lidar=LidarParams())
     spacing = min(1.0, 2 * HALF_M / math.ceil(math.sqrt(robots) + 1))
     cells = [(x, y) for x in np.arange(-HALF_M + spacing, HALF_M, spacing)
              for y in np.arange(-HALF_M + spacing, HALF_M, spacing)]
@@ -130,7 +143,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robots", type=int, nargs="+", default=[50, 100, 200, 400])
     parser.add_argument("--worlds", nargs="+", default=["open", "walls"],
-                        choices=["open", "walls"])
+                        choices=["open", "walls", "arena"])
     parser.add_argument("--seconds", type=float, default=10.0, help="sim time per run")
     parser.add_argument("--search", action="store_true",
                         help="also the largest N at real time, with and without scans")

@@ -43,10 +43,12 @@ DENSE_MAX_PAIRS = 64
 """Up to this many (laser, shape) pairs every beam is tried on every shape (``_dense``);
 beyond, only the beams of each shape's arc (fewer numpy calls against fewer products)."""
 
-CULL_MIN_BEAMS = 20_000
-"""Above this many (laser, beam, disc) triples the discs are cast nearest first, and a disc
-hidden behind nearer hits is left out (``_discs``); below, every triple is cheaper than the
-bookkeeping."""
+CULL_MIN_DEPTH = 2.0
+"""Where the discs' arcs cover every laser's turn more than this many times over on average
+(a crowd: each beam crosses several discs), they are cast nearest first and a disc hidden
+behind nearer hits is left out (``_discs``); where they cover less (robots scattered over a
+large floor), hardly any is hidden and casting every (laser, beam, disc) triple is cheaper
+than the bookkeeping."""
 
 NEAR_DISCS = (4, 12)
 """The tiers of each laser's discs by nearness: its 4 nearest are cast, then of its next 8 the
@@ -304,11 +306,12 @@ def _discs(ranges: FloatArray, origins: FloatArray, cos_t: FloatArray, sin_t: Fl
            centre: FloatArray, radius: FloatArray, skip: IntArray | None) -> None:
     """Every laser's beams on the discs in its reach, nearest first where they are many.
 
-    In a crowd most discs are hidden behind nearer ones: with more than ``CULL_MIN_BEAMS``
-    (laser, beam, disc) triples, each laser's ``NEAR_DISCS`` nearest discs are cast first, and
-    a farther disc only if some beam of its arc still reads beyond its nearest point (``gap``,
-    the least distance a beam can hit it at). A disc left out could only have given longer
-    distances than those read, so the ranges are the same, to the bit.
+    In a crowd most discs are hidden behind nearer ones: where the arcs cover each laser's
+    turn more than ``CULL_MIN_DEPTH`` times, each laser's discs are cast in tiers of
+    nearness (``NEAR_DISCS``), and a disc of a later tier only if some beam of its arc still
+    reads beyond its nearest point (``gap``, the least distance a beam can hit it at). A disc
+    left out could only have given longer distances than those read, so the ranges are the
+    same, to the bit.
     """
     count = len(beam_cos)
     lasers = len(origins)
@@ -330,27 +333,31 @@ def _discs(ranges: FloatArray, origins: FloatArray, cos_t: FloatArray, sin_t: Fl
     lo = np.arctan2(wy, wx) - half - headings[laser]
     first, spans = _arc_beams(lo, 2.0 * half, angle_min_rad, increment_rad, count)
     spans = np.where(inside, count, spans)
-    dir_x = cos_t[:, None] * beam_cos - sin_t[:, None] * beam_sin  # lasers x beams
-    dir_y = sin_t[:, None] * beam_cos + cos_t[:, None] * beam_sin
-    pairs = _DiscPairs(laser, wx, wy, r, first, spans, dir_x.ravel(), dir_y.ravel(), count)
-    if int(spans.sum()) <= CULL_MIN_BEAMS:
-        pairs.cast(ranges, slice(None))
+    turn = (cos_t, sin_t, beam_cos, beam_sin)
+    if int(spans.sum()) <= CULL_MIN_DEPTH * lasers * count:
+        _DiscPairs(laser, wx, wy, r, first, spans, turn, None).cast(ranges, slice(None))
         return
+    directions = (cos_t[:, None] * beam_cos - sin_t[:, None] * beam_sin,  # lasers x beams
+                  sin_t[:, None] * beam_cos + cos_t[:, None] * beam_sin)
+    pairs = _DiscPairs(laser, wx, wy, r, first, spans, turn, directions)
     gap = d - r
     per_laser = np.full((lasers, len(radius)), np.inf)
     per_laser[laser, disc] = gap
-    order = np.argsort(per_laser, axis=1)
-    rank = np.empty_like(order)
-    np.put_along_axis(rank, order, np.arange(len(radius))[None, :], axis=1)
-    pair_rank = rank[laser, disc]
-    tier_lo = 0
-    for tier_hi in (*NEAR_DISCS, len(radius)):
-        tier = np.nonzero((pair_rank >= tier_lo) & (pair_rank < tier_hi))[0]
-        if tier_lo and len(tier):
+    tier_lo = np.full(len(laser), -np.inf)
+    for nearest in (*NEAR_DISCS, len(radius)):
+        if nearest < len(radius):
+            bound = np.partition(per_laser, nearest - 1, axis=1)[:, nearest - 1][laser]
+            tier = np.nonzero((gap > tier_lo) & (gap <= bound))[0]
+        else:
+            bound = np.full(len(laser), np.inf)
+            tier = np.nonzero(gap > tier_lo)[0]
+        if np.isfinite(tier_lo).any() and len(tier):  # a later tier: only what is not hidden
             seen = _arc_max(ranges.reshape(lasers, count), laser[tier], first[tier], spans[tier])
             tier = tier[seen >= gap[tier]]
         pairs.cast(ranges, tier)
-        tier_lo = tier_hi
+        tier_lo = bound
+        if nearest >= len(radius):
+            break
 
 
 @dataclass(frozen=True)
@@ -363,19 +370,26 @@ class _DiscPairs:
     r: FloatArray
     first: IntArray
     spans: IntArray
-    dir_x: FloatArray
-    """Every laser's beam directions in the map frame, (lasers * beams,)."""
-    dir_y: FloatArray
-    count: int
+    turn: tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+    """The lasers' yaws' cos and sin, (lasers,), and the beams' in the laser frame, (n,)."""
+    directions: tuple[FloatArray, FloatArray] | None
+    """Every laser's beam directions in the map frame, x and y, (lasers, n): made once where
+    the pairs cast more than one turn of beams per laser; None: each entry turns its own."""
 
     def cast(self, ranges: FloatArray, which: slice | IntArray | npt.NDArray[np.bool_]) -> None:
         """Intersect the beams of the arcs of pairs ``which``; each beam keeps its nearest."""
         spans = self.spans[which]
         if not len(spans):
             return
-        arc, beam = _expand(self.first[which], spans, self.count)
-        flat = self.laser[which][arc] * self.count + beam
-        dx, dy = self.dir_x[flat], self.dir_y[flat]
+        cos_t, sin_t, beam_cos, beam_sin = self.turn
+        count = len(beam_cos)
+        arc, beam = _expand(self.first[which], spans, count)
+        laser = self.laser[which][arc]
+        flat = laser * count + beam
+        if self.directions is None:
+            dx, dy = _directions(laser, beam, cos_t, sin_t, beam_cos, beam_sin)
+        else:
+            dx, dy = self.directions[0].ravel()[flat], self.directions[1].ravel()[flat]
         cx, cy, rr = self.wx[which][arc], self.wy[which][arc], self.r[which][arc]
         along = cx * dx + cy * dy
         outside = cx * cx + cy * cy - rr * rr

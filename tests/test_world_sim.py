@@ -193,7 +193,7 @@ def test_a_crowds_scans_cast_nearest_first_are_the_same_to_the_bit(
     culled = lidar.raw_ranges_many(poses, world.footprints(), own)
     culled_pairs = sum(intersected)
     intersected.clear()
-    monkeypatch.setattr(raycast, "CULL_MIN_BEAMS", 10**9)
+    monkeypatch.setattr(raycast, "CULL_MIN_DEPTH", 1e9)
     every = lidar.raw_ranges_many(poses, world.footprints(), own)
     assert np.array_equal(culled, every)
     assert culled_pairs < 0.5 * sum(intersected), (culled_pairs, sum(intersected))
@@ -224,8 +224,17 @@ def test_scattered_discs_half_hidden_cast_nearest_first_are_the_same_to_the_bit(
         return raycast.cast(origins, headings, np.cos(angles), np.sin(angles), -math.pi,
                             2 * math.pi / 360, 12.0, walls, centre, radius)
 
+    intersected: list[int] = []
+    cast = raycast._DiscPairs.cast
+
+    def counted(pairs: raycast._DiscPairs, ranges: np.ndarray, which: Any) -> None:
+        intersected.append(int(pairs.spans[which].sum()))
+        cast(pairs, ranges, which)
+
+    monkeypatch.setattr(raycast._DiscPairs, "cast", counted)
     culled = ranges()
-    monkeypatch.setattr(raycast, "CULL_MIN_BEAMS", 10**9)
+    assert len(intersected) > 1, "cast in tiers of nearness"
+    monkeypatch.setattr(raycast, "CULL_MIN_DEPTH", 1e9)
     assert np.array_equal(culled, ranges())
 
 
