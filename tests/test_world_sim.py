@@ -165,6 +165,19 @@ def test_the_batched_scan_equals_the_reference_for_every_robot_others_included(
     assert seen_another > 0, "the robots saw each other"
 
 
+def count_intersections(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """From now on, the (laser, beam, disc) triples each cast of discs intersects, in order."""
+    intersected: list[int] = []
+    cast = raycast._DiscPairs.cast
+
+    def counted(pairs: raycast._DiscPairs, ranges: np.ndarray, which: Any) -> None:
+        intersected.append(int(pairs.spans[which].sum()))
+        cast(pairs, ranges, which)
+
+    monkeypatch.setattr(raycast._DiscPairs, "cast", counted)
+    return intersected
+
+
 @pytest.mark.parametrize("seed", range(2))
 def test_a_crowds_scans_cast_nearest_first_are_the_same_to_the_bit(
         seed: int, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -182,14 +195,7 @@ def test_a_crowds_scans_cast_nearest_first_are_the_same_to_the_bit(
     lidar = Simulation.of(world, world.names[0]).lidar
     poses = [Pose2D(*pose) for pose in world.poses()]
     own = list(range(len(poses)))
-    intersected: list[int] = []
-    cast = raycast._DiscPairs.cast
-
-    def counted(pairs: raycast._DiscPairs, ranges: np.ndarray, which: Any) -> None:
-        intersected.append(int(pairs.spans[which].sum()))
-        cast(pairs, ranges, which)
-
-    monkeypatch.setattr(raycast._DiscPairs, "cast", counted)
+    intersected = count_intersections(monkeypatch)
     culled = lidar.raw_ranges_many(poses, world.footprints(), own)
     culled_pairs = sum(intersected)
     intersected.clear()
@@ -224,14 +230,7 @@ def test_scattered_discs_half_hidden_cast_nearest_first_are_the_same_to_the_bit(
         return raycast.cast(origins, headings, np.cos(angles), np.sin(angles), -math.pi,
                             2 * math.pi / 360, 12.0, walls, centre, radius)
 
-    intersected: list[int] = []
-    cast = raycast._DiscPairs.cast
-
-    def counted(pairs: raycast._DiscPairs, ranges: np.ndarray, which: Any) -> None:
-        intersected.append(int(pairs.spans[which].sum()))
-        cast(pairs, ranges, which)
-
-    monkeypatch.setattr(raycast._DiscPairs, "cast", counted)
+    intersected = count_intersections(monkeypatch)
     culled = ranges()
     assert len(intersected) > 1, "cast in tiers of nearness"
     monkeypatch.setattr(raycast, "CULL_MIN_DEPTH", 1e9)
