@@ -13,6 +13,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -109,6 +110,69 @@ def dockerfile(path: Path) -> list[tuple[str, str]]:
         pending = ""
     assert not pending, f"{path}: dangling line continuation"
     return instructions
+
+
+def stage(path: Path, name: str) -> list[tuple[str, str]]:
+    """The instructions of build stage ``name`` (``FROM ... AS name``) of a Dockerfile."""
+    found: list[tuple[str, str]] = []
+    inside = False
+    for keyword, args in dockerfile(path):
+        if keyword == "FROM":
+            inside = args.endswith(f" AS {name}")
+        elif inside:
+            found.append((keyword, args))
+    assert found, f"{path}: no stage {name}"
+    return found
+
+
+SITE_INCLUDES = "/etc/nginx/websim/"
+"""Where the web image's nginx reads the include files its site stage writes."""
+
+
+def docker_site(directory: Path) -> tuple[Path, Path]:
+    """What web-interface/Dockerfile's ``site`` stage makes, made here: (site, includes).
+
+    Its COPY instructions from the build context are replayed into ``directory``, the vendor
+    stage's node_modules are this checkout's (``npm ci``), and its RUN runs as it is, on
+    this Python without its site-packages (``-S``: the stage's python image has only the
+    standard library); then the files the last stage adds to the web root (robot.json).
+    """
+    build = directory / "build"
+    run = None
+    for keyword, args in stage(WEB_DIR / "Dockerfile", "site"):
+        if keyword == "COPY" and args.startswith("--from=vendor "):
+            target = build / args.split()[-1]
+            shutil.copytree(WEB_DIR / "node_modules", target, symlinks=True)
+        elif keyword == "COPY":
+            *sources, destination = args.split()
+            for source in sources:
+                for path in sorted(PROJECT_DIR.glob(source.rstrip("/"))):
+                    target = build / destination
+                    if destination.endswith("/"):
+                        target = target / path.name if len(sources) > 1 or \
+                            not source.endswith("/") else target
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    if path.is_dir():
+                        shutil.copytree(path, target, dirs_exist_ok=True)
+                    else:
+                        shutil.copyfile(path, target)
+        elif keyword == "RUN":
+            run = args
+    assert run is not None and run.startswith("python -m websim.static_site "), run
+    out = run.replace("--out /site", f"--out {directory / 'site'}").replace(
+        "--nginx /nginx", f"--nginx {directory / 'nginx'}")
+    subprocess.run([sys.executable, "-S", *out.split()[1:]], cwd=build, check=True,
+                   capture_output=True, text=True, timeout=120)
+    site = directory / "site"
+    in_root = False
+    for keyword, args in dockerfile(WEB_DIR / "Dockerfile"):  # the web root's own files
+        if keyword == "WORKDIR":
+            in_root = args == "/usr/share/nginx/html"
+        elif keyword == "COPY" and in_root and not args.startswith("--from="):
+            *sources, _ = args.split()
+            for source in sources:
+                shutil.copyfile(PROJECT_DIR / source, site / Path(source).name)
+    return site, directory / "nginx"
 
 
 def build_of(service: str) -> tuple[Path, Path]:

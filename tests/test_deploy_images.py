@@ -3,14 +3,16 @@ amd64 pins, the ROS distribution an argument, build contexts that hold every COP
 everything the pages load, health checks repeated in compose, and a launch file that starts the
 robot and the nodes the rosbridge parameters configure.
 
-No image is built here: the Dockerfiles' RUN steps (apt, pip, npm) are not exercised.
+No image is built here: the Dockerfiles' RUN steps (apt, pip, npm) are not exercised, but the
+web image's site stage is replayed (its COPYs, and its standard-library RUN).
 """
 
 from __future__ import annotations
 
-import fnmatch
+import ast
 import json
 import re
+import sys
 from pathlib import Path
 
 import pytest
@@ -23,16 +25,20 @@ from deployment import (
     HTPASSWD_SCRIPT,
     LAUNCH_FILE,
     ROSAPI,
+    SITE_INCLUDES,
     STUDENT_BRIDGE,
     WEB,
     WEB_DIR,
     build_of,
     compose,
+    docker_site,
     dockerfile,
     node_params,
+    stage,
 )
 
 from physics.params import PROJECT_DIR
+from websim.static_site import INCLUDES
 
 
 def test_nothing_is_tied_to_amd64() -> None:
@@ -62,15 +68,46 @@ def test_bridge_dockerfile_uses_the_distro_argument_everywhere() -> None:
 def test_web_dockerfile_builds_vendor_files_with_npm_ci_and_serves_with_nginx() -> None:
     instructions = dockerfile(WEB_DIR / "Dockerfile")
     froms = [args for keyword, args in instructions if keyword == "FROM"]
-    assert len(froms) == 2
+    assert len(froms) == 3
     assert froms[0].startswith("node:") and froms[0].endswith(" AS vendor")
-    assert froms[1].startswith("nginx:")
+    assert froms[1].startswith("python:") and froms[1].endswith(" AS site")
+    assert froms[2].startswith("nginx:")
     runs = [args for keyword, args in instructions if keyword == "RUN"]
     assert any(run.startswith("npm ci") for run in runs)
+    site_runs = [args for keyword, args in stage(WEB_DIR / "Dockerfile", "site")
+                 if keyword == "RUN"]
+    assert site_runs == ["python -m websim.static_site --web web --out /site --nginx /nginx"]
     copies = [args for keyword, args in instructions if keyword == "COPY"]
-    assert "nginx.conf /etc/nginx/nginx.conf" in copies
-    assert f"docker-entrypoint.d/{HTPASSWD_SCRIPT.name} /docker-entrypoint.d/" in copies
+    assert "web-interface/nginx.conf /etc/nginx/nginx.conf" in copies
+    assert f"web-interface/docker-entrypoint.d/{HTPASSWD_SCRIPT.name} /docker-entrypoint.d/" \
+        in copies
     assert any(copy.startswith("--from=vendor ") and "node_modules" in copy for copy in copies)
+    assert f"--from=site /nginx/ {SITE_INCLUDES}" in copies
+    assert "--from=site /site/ ./" in copies
+
+
+def test_the_site_stage_needs_only_the_standard_library() -> None:
+    """The python image of the site stage has no websim dependencies: the modules it copies
+    import only the standard library and each other."""
+    copied = [word for keyword, args in stage(WEB_DIR / "Dockerfile", "site")
+              if keyword == "COPY" and not args.startswith("--from=")
+              for word in args.split()[:-1] if word.startswith("websim/")]
+    assert "websim/static_site.py" in copied
+    names = {Path(path).stem for path in copied}
+    for path in copied:
+        tree = ast.parse((PROJECT_DIR / path).read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                module = node.module
+            elif isinstance(node, ast.Import):
+                module = node.names[0].name
+            else:
+                continue
+            top, _, rest = module.partition(".")
+            if top == "websim":
+                assert rest in names, f"{path} imports {module}, which the stage lacks"
+            else:
+                assert top in sys.stdlib_module_names, f"{path} imports {module}"
 
 
 @pytest.mark.parametrize("service", [BRIDGE, WEB])
@@ -98,18 +135,6 @@ def test_the_bridge_image_carries_every_python_package_of_the_project() -> None:
     assert packages and set(packages) <= copied, sorted(set(packages) - copied)
 
 
-def published_sources() -> list[str]:
-    """What web-interface/Dockerfile copies from the build context into nginx's web root."""
-    sources: list[str] = []
-    in_root = False
-    for keyword, args in dockerfile(WEB_DIR / "Dockerfile"):
-        if keyword == "WORKDIR":
-            in_root = args == "/usr/share/nginx/html"
-        elif keyword == "COPY" and in_root and not args.startswith("--from="):
-            sources += args.split()[:-1]
-    return sources
-
-
 def page_references() -> set[str]:
     """Web-root paths the pages and their modules load (src, href, import ... from)."""
     references: set[str] = set()
@@ -123,33 +148,38 @@ def page_references() -> set[str]:
     return references
 
 
-def test_everything_the_pages_load_is_in_the_image() -> None:
+@pytest.mark.skipif(not (WEB_DIR / "node_modules").is_dir(),
+                    reason="web-interface/node_modules missing: npm ci --prefix web-interface")
+def test_everything_the_pages_load_is_in_the_image(tmp_path: Path) -> None:
+    """The site stage run here (its COPYs and its RUN): every file a page or module loads
+    is in the site, the pages carry the editor's import map, and every file the map names
+    is there too."""
+    site, includes = docker_site(tmp_path)
     routes = {"", "admin"}  # nginx locations, not files
-    sources = published_sources()
-    missing = []
     loaded = sorted(page_references() - routes)
-    assert {"js/main.js", "js/admin.js", "css/style.css"} <= set(loaded), \
+    assert {"js/main.js", "js/admin.js", "css/style.css", "js/code-editor.js"} <= set(loaded), \
         f"the pages' own files are missing from what they were found to load: {loaded}"
-    for path in loaded:
-        if path.startswith("node_modules/"):  # the vendor stage's npm ci
-            installed = (WEB_DIR / "node_modules").exists()
-            published = not installed or (WEB_DIR / path).is_file()
-        else:
-            # a clean URL (/class) is its page: nginx.conf's try_files $uri.html
-            file = path if (WEB_DIR / path).is_file() or "." in path else f"{path}.html"
-            published = (WEB_DIR / file).is_file() and any(
-                fnmatch.fnmatch(file, source) or file.startswith(source.rstrip("/") + "/")
-                for source in sources)
-        if not published:
-            missing.append(path)
+    # a clean URL (/class) is its page: nginx.conf's try_files $uri.html
+    missing = [path for path in loaded
+               if not (site / path).is_file() and not (site / f"{path}.html").is_file()]
     assert not missing, f"loaded by the pages but not in the image: {missing}"
+    page = (site / "index.html").read_text(encoding="utf-8")
+    assert "websim:importmap" not in page
+    mapped = json.loads(re.search(r'<script type="importmap">(.*?)</script>', page,
+                                  re.S).group(1))["imports"]
+    assert "@codemirror/view" in mapped
+    assert all((site / target).is_file() for target in mapped.values()), mapped
+    assert (site / "python" / "websim_worker.py").is_file()  # the Code panel's Python side
+    assert json.loads((site / "config.json").read_text()) == \
+        json.loads((WEB_DIR / "config.docker.json").read_text())
+    assert sorted(path.name for path in includes.iterdir()) == sorted(INCLUDES)
 
 
 def test_docker_pages_send_the_admin_page_to_the_password_protected_bridge() -> None:
     config = json.loads((WEB_DIR / "config.docker.json").read_text())
     assert config["adminWs"] == "/admin/rosbridge" and config["ws"] is None
     dockerfile = (WEB_DIR / "Dockerfile").read_text()
-    assert "COPY config.docker.json config.json" in dockerfile
+    assert "COPY web-interface/config.docker.json web/config.json" in dockerfile
     nginx = (WEB_DIR / "nginx.conf").read_text()
     assert "location ^~ /admin" in nginx and "location = /admin/rosbridge" in nginx
 

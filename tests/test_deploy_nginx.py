@@ -1,8 +1,10 @@
 """The real nginx binary runs web-interface/nginx.conf in front of a real ``websim serve``
 standing in for the ros2-web-bridge container: only the upstream address, the listen port and
-file paths are changed, plus temp paths in the test's directory. roslibpy reads /odom through
-/rosbridge; /admin and its WebSocket need the password that the image's entrypoint script
-writes, and nobody gets in when no password is set.
+file paths are changed, plus temp paths in the test's directory. It serves the site the
+image's site stage writes (replayed here: ``deployment.docker_site``). roslibpy reads /odom
+through /rosbridge; /admin and its WebSocket need the password that the image's entrypoint
+script writes, and nobody gets in when no password is set; the pages carry the headers
+``websim serve`` sends, and the Code panel runs a student's Python in headless Chromium.
 """
 
 from __future__ import annotations
@@ -22,20 +24,38 @@ from typing import Any
 
 import pytest
 import roslibpy
+from code_page import (
+    CODEMIRROR,
+    LOAD_TIMEOUT_S,
+    PYODIDE,
+    code_context,
+    open_code,
+    run_program,
+    set_language,
+    type_program,
+    wait_output,
+)
 from deployment import (
     BRIDGE,
     HTPASSWD_SCRIPT,
     NGINX,
     NGINX_CONF,
     OPENSSL,
+    SITE_INCLUDES,
     WEB_DIR,
+    docker_site,
 )
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 from classroom.nginx_config import foreground_command, in_directory
+from websim.import_map import script_hash
+from websim.page_policy import WORKER_POLICIES, page_policy
 
+from chromium import skip_reason
 from server_process import ServerProcess, free_port, wait_for
+
+BROWSER_SKIP = skip_reason([CODEMIRROR, PYODIDE])
 
 ADMIN_USER = "teacher"
 ADMIN_PASSWORD = "correct horse: battery staple"
@@ -49,6 +69,8 @@ class Nginx:
     url: str
     htpasswd: Path
     process: subprocess.Popen[bytes]
+    site: Path
+    """The web root: what the image's site stage wrote."""
 
     @property
     def ws_url(self) -> str:
@@ -76,7 +98,8 @@ def basic_auth(user: str, password: str) -> dict[str, str]:
     return {"Authorization": f"Basic {token}"}
 
 
-def deployment_conf(server: ServerProcess, directory: Path, port: int, htpasswd: Path) -> str:
+def deployment_conf(server: ServerProcess, directory: Path, port: int, htpasswd: Path,
+                    site: Path, includes: Path) -> str:
     """nginx.conf with the test's addresses and paths; everything else unchanged."""
     conf = NGINX_CONF.read_text()
     replacements = {
@@ -84,7 +107,8 @@ def deployment_conf(server: ServerProcess, directory: Path, port: int, htpasswd:
         f"{BRIDGE}:": "127.0.0.1:",
         ":9090;": f":{server.ws_port};",
         ":9091;": f":{server.ws_port};",
-        "/usr/share/nginx/html": str(WEB_DIR),
+        "/usr/share/nginx/html": str(site),
+        SITE_INCLUDES: f"{includes}/",
         "/etc/nginx/.htpasswd": str(htpasswd),
         "/var/log/nginx/": f"{directory}/",
     }
@@ -111,16 +135,20 @@ def nginx(server: ServerProcess, tmp_path_factory: pytest.TempPathFactory) -> It
         pytest.skip("nginx not installed")
     if OPENSSL is None:
         pytest.skip("openssl not installed")
+    if not (WEB_DIR / "node_modules").is_dir():
+        pytest.skip("web-interface/node_modules missing (npm ci --prefix web-interface): "
+                    "the image's vendor stage")
     directory = tmp_path_factory.mktemp("nginx")
+    site, includes = docker_site(directory / "image")
     htpasswd = directory / "htpasswd"
     write_htpasswd(htpasswd, ADMIN_USER=ADMIN_USER, ADMIN_PASSWORD=ADMIN_PASSWORD)
     port = free_port()
     conf = directory / "nginx.conf"
-    conf.write_text(deployment_conf(server, directory, port, htpasswd))
+    conf.write_text(deployment_conf(server, directory, port, htpasswd, site, includes))
     log = (directory / "stderr.log").open("wb")
     process = subprocess.Popen(foreground_command(NGINX, conf, directory),
                                stdout=log, stderr=subprocess.STDOUT)
-    running = Nginx(f"http://127.0.0.1:{port}", htpasswd, process)
+    running = Nginx(f"http://127.0.0.1:{port}", htpasswd, process, site)
 
     def healthy() -> bool:
         if process.poll() is not None:
@@ -150,15 +178,10 @@ def ros(nginx: Nginx) -> Iterator[roslibpy.Ros]:
 
 
 def test_nginx_serves_the_page(nginx: Nginx) -> None:
-    page = WEB_DIR / "index.html"
-    if page.exists():
-        response = get(f"{nginx.url}/")
-        assert response.headers["Content-Type"].startswith("text/html")
-    else:  # the frontend is not there yet: any static file proves the static serving
-        page = WEB_DIR / "package.json"
-        response = get(f"{nginx.url}/package.json")
+    response = get(f"{nginx.url}/")
+    assert response.headers["Content-Type"].startswith("text/html")
     assert response.status == 200
-    assert response.body == page.read_bytes()
+    assert response.body == (nginx.site / "index.html").read_bytes()
     assert response.headers["Cache-Control"] == "no-cache"
 
 
@@ -212,7 +235,7 @@ def test_admin_page_needs_the_password(nginx: Nginx) -> None:
         assert wrong.status == 401, path
     page = get(f"{nginx.url}/admin", basic_auth(ADMIN_USER, ADMIN_PASSWORD))
     assert page.status == 200
-    assert page.body == (WEB_DIR / "admin.html").read_bytes()
+    assert page.body == (nginx.site / "admin.html").read_bytes()
     assert page.headers["Content-Type"].startswith("text/html")
     assert page.headers["Cache-Control"] == "no-cache"
 
@@ -253,3 +276,91 @@ def test_admin_is_closed_without_credentials_and_opens_with_htpasswd_lines(
     finally:
         write_htpasswd(nginx.htpasswd, ADMIN_USER=ADMIN_USER, ADMIN_PASSWORD=ADMIN_PASSWORD)
     assert get(f"{nginx.url}/admin/rosbridge", own).status != 401
+
+
+ISOLATION = {"Cross-Origin-Opener-Policy": "same-origin",
+             "Cross-Origin-Embedder-Policy": "require-corp",
+             "Cross-Origin-Resource-Policy": "same-origin"}
+
+
+def header_values(response: Response, name: str) -> list[str]:
+    return list(response.headers.get_all(name) or [])
+
+
+def test_the_pages_carry_the_import_map_and_the_policy_that_admits_it(nginx: Nginx) -> None:
+    """As ``websim serve`` sends them: the editor's import map in the robot's page, admitted
+    by its hash and nothing else inline (the pages without a map get the same policy: it
+    admits that one script only), cross-origin isolated, framed by nobody."""
+    page = get(f"{nginx.url}/")
+    script = re.search(rb'<script type="importmap">(.*?)</script>', page.body, re.S)
+    assert script is not None
+    policy = page_policy(script_hash(script[1].decode()))
+    for path in ("/", "/class", "/submissions"):
+        response = get(f"{nginx.url}{path}")
+        assert response.status == 200, path
+        assert header_values(response, "Content-Security-Policy") == [policy], path
+        for name, value in {**ISOLATION, "X-Frame-Options": "DENY",
+                            "Referrer-Policy": "no-referrer"}.items():
+            assert header_values(response, name) == [value], (path, name)
+
+
+def test_every_file_the_pages_load_is_isolated_too(nginx: Nginx) -> None:
+    for path in ("/js/main.js", "/css/style.css", "/node_modules/pyodide/pyodide.mjs",
+                 "/node_modules/@codemirror/view/dist/index.js", "/python/websim_worker.py"):
+        response = get(f"{nginx.url}{path}")
+        assert response.status == 200, path
+        for name, value in ISOLATION.items():
+            assert header_values(response, name) == [value], (path, name)
+        assert header_values(response, "X-Content-Type-Options") == ["nosniff"], path
+    assert get(f"{nginx.url}/node_modules/pyodide/package.json").status == 404  # allow-list
+
+
+@pytest.mark.parametrize("worker", sorted(WORKER_POLICIES))
+def test_each_code_worker_is_served_with_its_own_policy_alone(nginx: Nginx, worker: str) -> None:
+    """A worker follows the policy it is served with: Pyodide's needs eval and WebAssembly,
+    which the page's policy refuses; two policies would both apply."""
+    response = get(f"{nginx.url}/{worker}")
+    assert response.status == 200
+    assert response.body == (WEB_DIR / worker).read_bytes()
+    assert header_values(response, "Content-Security-Policy") == [WORKER_POLICIES[worker]]
+    assert response.headers["Cache-Control"] == "no-cache"
+    for name, value in ISOLATION.items():
+        assert header_values(response, name) == [value], name
+
+
+@pytest.mark.browser
+@pytest.mark.skipif(BROWSER_SKIP is not None, reason=BROWSER_SKIP or "")
+def test_the_code_panel_runs_a_students_python_through_the_images_nginx(
+        nginx: Nginx, browser: Any) -> None:
+    """The Docker stack's page in headless Chromium, under the headers nginx sends (no
+    bypass), every other host refused: the Code panel's editor loads by the import map, the
+    page is cross-origin isolated, and a program typed there reads the robot's /odom through
+    nginx's /rosbridge."""
+    url = f"{nginx.url}/?ws={nginx.ws_url}/rosbridge"
+    with code_context(browser, nginx.url, nginx.ws_url) as context:
+        page = context.new_page()
+        errors: list[str] = []
+        page.on("pageerror", lambda error: errors.append(str(error)))
+        open_code(page, url)
+        assert page.evaluate("() => crossOriginIsolated") is True
+        set_language(page, "python")
+        type_program(page, ODOM_PROGRAM)
+        run_program(page)
+        wait_output(page, "odom frame odom", timeout_s=LOAD_TIMEOUT_S)
+        assert errors == []
+
+
+ODOM_PROGRAM = """import os
+import time
+
+import roslibpy
+
+ros = roslibpy.Ros(host=os.environ["WEBSIM_URL"])
+ros.run()
+seen = []
+roslibpy.Topic(ros, "/odom", "nav_msgs/msg/Odometry").subscribe(seen.append)
+while not seen:
+    time.sleep(0.05)
+print("odom frame", seen[0]["header"]["frame_id"])
+ros.close()
+"""

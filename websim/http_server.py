@@ -52,6 +52,11 @@ from aiohttp.abc import AbstractAccessLogger
 from ros_nodes.robot_interface import ROBOTS_PREFIX
 from rosbridge.core.limits import ClientLimits, TrustedProxies, budget_key
 from websim.import_map import with_import_map
+from websim.page_policy import (
+    SECURITY_HEADERS,
+    WORKER_POLICIES,
+    page_policy,
+)
 from websim.web_files import CONTENT_TYPES, PYODIDE_FILES, published
 
 log = logging.getLogger("websim.http")
@@ -76,40 +81,6 @@ LIVE_DOCUMENTS = ("/robot.json", "/config.json", "/workers.json")
 
 CACHE_CONTROL = "no-cache"
 """Every answer is revalidated: a classroom reloads after every update (ETags make it a 304)."""
-
-CONTENT_SECURITY_POLICY = (
-    "default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
-    "img-src 'self' data: blob:; connect-src 'self' ws: wss:; object-src 'none'; "
-    "base-uri 'none'; form-action 'self'; frame-ancestors 'none'")
-"""The pages load everything from this server (offline: no CDN), run no inline script, and
-may be framed by nobody (a token page in another site's frame is a clickjacking target);
-their WebSocket is on another port, so ``connect-src`` admits ws: and wss:. Inline styles
-stay allowed: the joystick library sets them."""
-
-SECURITY_HEADERS = {
-    "Content-Security-Policy": CONTENT_SECURITY_POLICY,
-    "X-Frame-Options": "DENY",
-    "Referrer-Policy": "no-referrer",
-    "Cross-Origin-Opener-Policy": "same-origin",
-    "Cross-Origin-Embedder-Policy": "require-corp",
-    "Cross-Origin-Resource-Policy": "same-origin",
-}
-"""On every answer: the admin pages carry the token in their URL, which no Referer may leak.
-The three Cross-Origin headers make the pages cross-origin isolated, which SharedArrayBuffer
-needs (the Code panel's Python worker reads its frames from one, and Pyodide's interrupt is
-one); everything the pages load is this server's own, so nothing else changes."""
-
-WORKER_POLICIES = {
-    "js/code-python-worker.js": (
-        "default-src 'self'; script-src 'self' 'unsafe-eval' 'wasm-unsafe-eval'; "
-        "connect-src 'self'; object-src 'none'; base-uri 'none'"),
-    "js/code-js-worker.js": (
-        "default-src 'self'; script-src 'self' blob:; connect-src 'self' ws: wss:; "
-        "object-src 'none'; base-uri 'none'"),
-}
-"""The Code panel's workers' own policies (a worker follows the one it is served with, not its
-page's): Pyodide compiles WebAssembly and its glue calls eval(); a JavaScript program is
-loaded from a blob: URL and opens its robot's WebSocket. The page's policy stays as it is."""
 
 LOOP_GZIP_MAX_BYTES = 1 << 20
 """A larger file is gzipped on a thread, not on the event loop (Pyodide's 9.6 MB interpreter
@@ -441,7 +412,6 @@ class HttpServer:
                 log.exception("HTTP %s %s failed", request.method, request.path)
                 response = web.Response(status=500, text="500: Internal Server Error")
             response.headers.setdefault("Cache-Control", CACHE_CONTROL)
-            response.headers["X-Content-Type-Options"] = "nosniff"
             for name, value in SECURITY_HEADERS.items():  # unless the answer set its own
                 response.headers.setdefault(name, value)
             response.headers["Server"] = "websim"  # not aiohttp's and Python's versions
@@ -531,8 +501,7 @@ class HttpServer:
         if suffix == ".html":
             body, script = with_import_map(body, Path(self._web_dir))
             if script is not None:
-                policy = CONTENT_SECURITY_POLICY.replace("script-src 'self'",
-                                                         f"script-src 'self' {script}")
+                policy = page_policy(script)
         gzipped = None
         compress = suffix in COMPRESSIBLE and len(body) >= GZIP_MIN_BYTES
         if compress and (gzip_here or len(body) <= LOOP_GZIP_MAX_BYTES):
