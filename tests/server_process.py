@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import csv
 import functools
 import json
 import os
@@ -15,6 +16,7 @@ import time
 import urllib.request
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 ADMIN_TOKEN = "Test-admin-token-2026-suite"
@@ -111,6 +113,22 @@ def limit_open_files(limit: int) -> None:
     import resource
 
     resource.setrlimit(resource.RLIMIT_NOFILE, (limit, limit))
+
+
+def start_arena(folder: Path, world: str, names: Sequence[str],
+                extra_args: Sequence[str] = ()) -> tuple[ServerProcess, list[dict[str, str]]]:
+    """``websim serve --class ROSTER --arena --world WORLD`` in ``folder``, and its links.
+
+    ``world``: the world file's text; ``names``: the roster. Returns the server (healthy) and
+    the rows of its links file (name, token, page...).
+    """
+    (folder / "arena.yaml").write_text(world)
+    (folder / "roster.txt").write_text("".join(f"{name}\n" for name in names))
+    links = folder / "links.csv"
+    server = start_server(["--class", str(folder / "roster.txt"), "--arena", "--world",
+                           str(folder / "arena.yaml"), "--links", str(links), *extra_args])
+    with links.open(newline="") as file:
+        return server, list(csv.DictReader(file))
 
 
 def start_server(extra_args: Sequence[str] = (), ws_port: int | None = None,

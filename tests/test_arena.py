@@ -9,7 +9,6 @@ drive another's robot; the instructor's root view sees every robot.
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import threading
@@ -23,7 +22,7 @@ import roslibpy
 from physics import RobotParams
 from physics.robot import CONTACT_SKIN_M
 
-from server_process import ADMIN_TOKEN, ServerProcess, start_server, wait_for
+from server_process import ADMIN_TOKEN, ServerProcess, start_arena, wait_for
 
 RADIUS_M = RobotParams().footprint_radius_m
 WORLD = """\
@@ -43,14 +42,9 @@ TWIST = {"linear": {"x": 0.5, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.
 @pytest.fixture(scope="module")
 def arena(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[ServerProcess,
                                                                       dict[str, str]]]:
-    folder = tmp_path_factory.mktemp("arena")
-    (folder / "arena.yaml").write_text(WORLD)
-    (folder / "roster.txt").write_text("alice\nbob\ncarol\n")
-    links = folder / "links.csv"
-    server = start_server(["--class", str(folder / "roster.txt"), "--arena", "--world",
-                           str(folder / "arena.yaml"), "--links", str(links),
-                           "--student-spawn", "1"])
-    tokens = {row["name"]: row["token"] for row in csv.DictReader(links.open())}
+    server, links = start_arena(tmp_path_factory.mktemp("arena"), WORLD,
+                                ["alice", "bob", "carol"], ["--student-spawn", "1"])
+    tokens = {row["name"]: row["token"] for row in links}
     yield server, tokens
     server.stop()
 

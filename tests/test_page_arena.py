@@ -5,7 +5,6 @@ robot. ``websim serve --class ROSTER --arena``, real pages, real WebSockets.
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Iterator
 from typing import Any
@@ -13,7 +12,7 @@ from typing import Any
 import pytest
 from page_helpers import needs_browser, open_page, wait_connected
 
-from server_process import ADMIN_TOKEN, ServerProcess, start_server, wait_for
+from server_process import ADMIN_TOKEN, ServerProcess, start_arena, wait_for
 
 WORLD = """\
 name: arena
@@ -30,13 +29,9 @@ robots:
 @pytest.fixture(scope="module")
 def arena(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[ServerProcess,
                                                                       dict[str, str]]]:
-    folder = tmp_path_factory.mktemp("page_arena")
-    (folder / "arena.yaml").write_text(WORLD)
-    (folder / "roster.txt").write_text("alice\nbob\ncarol\n")
-    links = folder / "links.csv"
-    server = start_server(["--class", str(folder / "roster.txt"), "--arena", "--world",
-                           str(folder / "arena.yaml"), "--links", str(links)])
-    pages = {row["name"]: row["page"] for row in csv.DictReader(links.open())}
+    server, links = start_arena(tmp_path_factory.mktemp("page_arena"), WORLD,
+                                ["alice", "bob", "carol"])
+    pages = {row["name"]: row["page"] for row in links}
     yield server, pages
     server.stop()
 
