@@ -115,14 +115,25 @@ def limit_open_files(limit: int) -> None:
     resource.setrlimit(resource.RLIMIT_NOFILE, (limit, limit))
 
 
-def start_arena(folder: Path, world: str, names: Sequence[str],
+ARENA_BOX = """\
+name: arena
+start: [0.0, -2.0, 0.0]
+polylines:
+  - points: [[-3, -3], [3, -3], [3, 3], [-3, 3]]
+    closed: true
+"""
+"""The arena tests' world: a closed 6 x 6 m box, its start off the centre line."""
+
+
+def start_arena(folder: Path, robots: str, names: Sequence[str],
                 extra_args: Sequence[str] = ()) -> tuple[ServerProcess, list[dict[str, str]]]:
     """``websim serve --class ROSTER --arena --world WORLD`` in ``folder``, and its links.
 
-    ``world``: the world file's text; ``names``: the roster. Returns the server (healthy) and
-    the rows of its links file (name, token, page...).
+    The world is ``ARENA_BOX`` with ``robots`` (its ``robots:`` section, YAML text);
+    ``names``: the roster. Returns the server (healthy) and the rows of its links file
+    (name, token, page...).
     """
-    (folder / "arena.yaml").write_text(world)
+    (folder / "arena.yaml").write_text(ARENA_BOX + robots)
     (folder / "roster.txt").write_text("".join(f"{name}\n" for name in names))
     links = folder / "links.csv"
     server = start_server(["--class", str(folder / "roster.txt"), "--arena", "--world",

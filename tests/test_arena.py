@@ -25,12 +25,7 @@ from physics.robot import CONTACT_SKIN_M
 from server_process import ADMIN_TOKEN, ServerProcess, start_arena, wait_for
 
 RADIUS_M = RobotParams().footprint_radius_m
-WORLD = """\
-name: arena
-start: [0.0, -2.0, 0.0]
-polylines:
-  - points: [[-3, -3], [3, -3], [3, 3], [-3, 3]]
-    closed: true
+ROBOTS = """\
 robots:
   - {name: alice, start: [-1.0, 0.0, 0.0]}
   - {name: bob, start: [1.0, 0.0, 3.141592653589793], params: {footprint_radius_m: 0.15}}
@@ -42,7 +37,7 @@ TWIST = {"linear": {"x": 0.5, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.
 @pytest.fixture(scope="module")
 def arena(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[ServerProcess,
                                                                       dict[str, str]]]:
-    server, links = start_arena(tmp_path_factory.mktemp("arena"), WORLD,
+    server, links = start_arena(tmp_path_factory.mktemp("arena"), ROBOTS,
                                 ["alice", "bob", "carol"], ["--student-spawn", "1"])
     tokens = {row["name"]: row["token"] for row in links}
     yield server, tokens

@@ -14,12 +14,7 @@ from page_helpers import needs_browser, open_page, wait_connected
 
 from server_process import ADMIN_TOKEN, ServerProcess, start_arena, wait_for
 
-WORLD = """\
-name: arena
-start: [0.0, -2.0, 0.0]
-polylines:
-  - points: [[-3, -3], [3, -3], [3, 3], [-3, 3]]
-    closed: true
+ROBOTS = """\
 robots:
   - {name: alice, start: [-1.0, 0.0, 0.0]}
   - {name: bob, start: [1.0, 0.5, 1.5707963267948966]}
@@ -29,7 +24,7 @@ robots:
 @pytest.fixture(scope="module")
 def arena(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[ServerProcess,
                                                                       dict[str, str]]]:
-    server, links = start_arena(tmp_path_factory.mktemp("page_arena"), WORLD,
+    server, links = start_arena(tmp_path_factory.mktemp("page_arena"), ROBOTS,
                                 ["alice", "bob", "carol"])
     pages = {row["name"]: row["page"] for row in links}
     yield server, pages
