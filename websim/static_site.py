@@ -29,7 +29,7 @@ import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
-from websim.import_map import with_import_map
+from websim.import_map import MARKER, import_map, with_import_map
 from websim.page_policy import SECURITY_HEADERS, WORKER_POLICIES, page_policy
 from websim.web_files import CONTENT_TYPES, published_files
 
@@ -95,13 +95,16 @@ def export(web_dir: Path, out_dir: Path, nginx_dir: Path) -> list[str]:
         ValueError: a package.json names no entry, or a header cannot be written for nginx.
     """
     written = []
-    scripts = set()
+    scripts: set[str] = set()
     for relative in published_files(web_dir):
         source = web_dir / relative
         target = out_dir / relative
         target.parent.mkdir(parents=True, exist_ok=True)
         if relative.endswith(".html"):
-            page, script = with_import_map(source.read_bytes(), web_dir)
+            page = source.read_bytes()
+            if MARKER in page and not scripts:
+                import_map(web_dir)  # raises: a site without its editor is not a site
+            page, script = with_import_map(page, web_dir)
             target.write_bytes(page)
             if script is not None:
                 scripts.add(script)
