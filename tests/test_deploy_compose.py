@@ -56,4 +56,4 @@ def test_compose_has_both_services_on_one_network_with_restart_and_healthchecks(
         assert "platform" not in service, name
     assert services[BRIDGE]["networks"] == services[WEB]["networks"]
     assert build_of(BRIDGE) == (PROJECT_DIR, BRIDGE_DIR / "Dockerfile")
-    assert build_of(WEB) == (WEB_DIR, WEB_DIR / "Dockerfile")
+    assert build_of(WEB) == (PROJECT_DIR, WEB_DIR / "Dockerfile")  # it runs websim.static_site
