@@ -343,21 +343,17 @@ def _discs(ranges: FloatArray, origins: FloatArray, cos_t: FloatArray, sin_t: Fl
     gap = d - r
     per_laser = np.full((lasers, len(radius)), np.inf)
     per_laser[laser, disc] = gap
-    tier_lo = np.full(len(laser), -np.inf)
-    for nearest in (*NEAR_DISCS, len(radius)):
-        if nearest < len(radius):
-            bound = np.partition(per_laser, nearest - 1, axis=1)[:, nearest - 1][laser]
-            tier = np.nonzero((gap > tier_lo) & (gap <= bound))[0]
-        else:
-            bound = np.full(len(laser), np.inf)
-            tier = np.nonzero(gap > tier_lo)[0]
-        if np.isfinite(tier_lo).any() and len(tier):  # a later tier: only what is not hidden
+    nearer = np.full(len(laser), -np.inf)  # each pair's laser's previous tiers reach this far
+    for nearest in (*(n for n in NEAR_DISCS if n < len(radius)), None):
+        bound = np.full(len(laser), np.inf) if nearest is None else \
+            np.partition(per_laser, nearest - 1, axis=1)[laser, nearest - 1]
+        tier = np.nonzero((gap > nearer) & (gap <= bound))[0]
+        if len(tier) and np.isfinite(nearer).any():
+            # a later tier: only the discs some beam of whose arc still reads beyond them
             seen = _arc_max(ranges.reshape(lasers, count), laser[tier], first[tier], spans[tier])
             tier = tier[seen >= gap[tier]]
         pairs.cast(ranges, tier)
-        tier_lo = bound
-        if nearest >= len(radius):
-            break
+        nearer = bound
 
 
 @dataclass(frozen=True)

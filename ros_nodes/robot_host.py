@@ -237,8 +237,7 @@ class RobotHost:
         if shed:
             self.stats.scans_shed += sheddable
         try:
-            publications = (self.robot.publications(wanted, shed) if scans is None
-                            else self.robot.publications(wanted, shed, scans=scans))
+            publications = self.robot.messages(due, shed)
         except Exception as error:  # the robot's boundary: record, recover, go on
             self.faults.record("stepping the robot", error)
             self.recover("building its messages failed")

@@ -7,7 +7,7 @@ clock) is decided in one place; its tap (``ros_nodes.tap``) sees what crosses it
 
 from __future__ import annotations
 
-from collections.abc import Callable, Container
+from collections.abc import Callable, Container, Sequence
 from typing import Any
 
 from physics import Simulation
@@ -211,10 +211,20 @@ class VirtualRobot:
             scans: only the messages that read the LiDAR's scan (True), only the others
                 (False: the tick's /odom and /tf, out before its scan pass), or all (None).
         """
+        return self.messages(self.due(wanted, scans), shed)
+
+    def messages(self, sensors: Sequence[Sensor], shed: bool = False) -> list[Publication]:
+        """The messages of ``sensors`` (``due``'s) at the tick just advanced to.
+
+        The tap sees them.
+
+        Args:
+            sensors: the sensors due whose messages to build.
+            shed: leave out the sheddable sensors (a late tick: /scan goes first).
+        """
         now_s = self.clock.stamp_s()
         out: list[Publication] = [(sensor.topic, sensor.build(self.sim, now_s))
-                                  for sensor in self.due(wanted, scans)
-                                  if not (shed and sensor.sheddable)]
+                                  for sensor in sensors if not (shed and sensor.sheddable)]
         if self.tap.attached:
             time_s = self.sim.time_s
             for spec, msg in out:

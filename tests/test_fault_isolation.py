@@ -102,13 +102,13 @@ def test_a_state_gone_non_finite_is_reset_to_spawn(mode: str) -> None:
 def test_a_message_no_encoder_can_write_is_a_fault_not_a_crash() -> None:
     def fault(server: SimServer) -> None:
         robot = server.robot
-        publications = robot.publications
+        messages = robot.messages
 
-        def with_a_bad_message(scan: bool = True, wanted: Any = None) -> list[Any]:
-            robot.publications = publications  # type: ignore[method-assign]
-            return [*publications(scan, wanted), (ODOM, {"header": object()})]
+        def with_a_bad_message(sensors: Any, shed: bool = False) -> list[Any]:
+            robot.messages = messages  # type: ignore[method-assign]
+            return [*messages(sensors, shed), (ODOM, {"header": object()})]
 
-        robot.publications = with_a_bad_message  # type: ignore[method-assign]
+        robot.messages = with_a_bad_message  # type: ignore[method-assign]
 
     health, rate_hz, server = asyncio.run(run_with_fault(fault))
     assert_recovered(health, rate_hz, server, "encoding /odom: TypeError")
