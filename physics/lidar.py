@@ -36,7 +36,7 @@ import numpy as np
 import numpy.typing as npt
 import pymunk
 
-from physics import raycast
+from physics import raycast, raycast_kernel
 from physics.geometry import WorldShapes
 from physics.params import LidarParams
 from physics.raycast import cast, cast_one
@@ -67,6 +67,7 @@ class Lidar:
         self._params = params
         self._world_space = world_space
         self._shapes = shapes
+        raycast_kernel.kernel()  # numba's kernel loaded now (once), not on a first scan tick
         beam_angles_rad = params.angle_min_rad + np.arange(
             params.num_rays, dtype=np.float64) * params.angle_increment_rad
         self.beam_cos: FloatArray = np.cos(beam_angles_rad)
@@ -120,11 +121,12 @@ class Lidar:
         """Distance to the first shape along each beam, +inf if none within range_max (m).
 
         The walls and obstacles, and ``discs`` (other robots: rows of x, y, radius). Few
-        shapes (the maze): every beam on every shape in one product (``cast_one``); many:
-        only the beams of each shape's arc (``raw_ranges_many``).
+        shapes (the maze): every beam on every shape in one product (``cast_one``); many, or
+        with the compiled kernel (``physics.raycast_kernel``): ``raw_ranges_many``.
         """
         shapes = self._shapes
-        if len(discs) or len(shapes.walls) + len(shapes.circle_radius) > raycast.DENSE_MAX_PAIRS:
+        if len(discs) or len(shapes.walls) + len(shapes.circle_radius) > raycast.DENSE_MAX_PAIRS \
+                or raycast_kernel.kernel() is not None:
             ranges: FloatArray = self.raw_ranges_many([robot_pose], discs)[0]
             return ranges
         laser = self.laser_pose(robot_pose)

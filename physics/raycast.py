@@ -28,6 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from physics import raycast_kernel
+
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
 
@@ -84,6 +86,8 @@ class Walls:
     @classmethod
     def of(cls, a: FloatArray, b: FloatArray) -> Walls:
         """The walls from ``a[i]`` to ``b[i]``."""
+        a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 2)
+        b = np.ascontiguousarray(b, dtype=np.float64).reshape(-1, 2)
         e = b - a
         rows = np.concatenate([np.stack((e[:, 1], -e[:, 0]), axis=1),
                                np.stack((a[:, 1], -a[:, 0]), axis=1),
@@ -141,6 +145,20 @@ def cast(origins: FloatArray, headings: FloatArray, beam_cos: FloatArray, beam_s
     """
     count = len(beam_cos)
     lasers = len(origins)
+    compiled = raycast_kernel.kernel()
+    if compiled is not None and lasers:
+        out = np.full((lasers, count), np.inf)
+        skip = np.full(lasers, -1, dtype=np.intp) if disc_skip is None else disc_skip
+        compiled(out, np.ascontiguousarray(origins, dtype=np.float64),
+                 np.ascontiguousarray(headings, dtype=np.float64),
+                 np.ascontiguousarray(beam_cos, dtype=np.float64),
+                 np.ascontiguousarray(beam_sin, dtype=np.float64),
+                 float(angle_min_rad), float(increment_rad), float(range_max_m), walls.a,
+                 walls.b, np.ascontiguousarray(disc_centre, dtype=np.float64).reshape(-1, 2),
+                 np.ascontiguousarray(disc_radius, dtype=np.float64),
+                 np.ascontiguousarray(skip, dtype=np.intp), MARGIN_BEAMS, WIDE_ARC_RAD,
+                 PARALLEL_EPS)
+        return out
     ranges = np.full(lasers * count, np.inf)
     if lasers == 0:
         return ranges.reshape(0, count)

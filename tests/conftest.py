@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -9,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from physics import RobotParams, Simulation, World, load_world
+from physics import RobotParams, Simulation, World, load_world, raycast_kernel
 from physics.world import WORLDS_DIR, world_from_dict
 
 pytest.register_assert_rewrite("ros_fixtures")  # a plugin the ROS test modules import first
@@ -27,6 +28,30 @@ def no_server_outlives_its_test() -> Iterator[None]:
     from server_process import stop_leftovers
 
     stop_leftovers()
+
+
+@functools.cache
+def compiled_raycast() -> raycast_kernel.Kernel | None:
+    """numba's kernel of ``physics.raycast_kernel``, compiled once for the run; None without
+    numba."""
+    return raycast_kernel._compile()
+
+
+@pytest.fixture
+def numpy_raycast(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``physics.raycast`` casts in numpy, where numba's kernel would otherwise cast: for the
+    tests of the numpy path's own parts (its dense and arc paths, its culling of discs)."""
+    monkeypatch.setattr(raycast_kernel, "_loaded", [None])
+
+
+@pytest.fixture(params=["numpy", "compiled"])
+def raycast_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Each cast of the test in numpy, then in numba's kernel (``websim[fast]``)."""
+    kernel = None if request.param == "numpy" else compiled_raycast()
+    if request.param == "compiled" and kernel is None:
+        pytest.skip("numba is not installed (the optional [fast] extra): the numpy path only")
+    monkeypatch.setattr(raycast_kernel, "_loaded", [kernel])
+    return str(request.param)
 
 
 @pytest.fixture

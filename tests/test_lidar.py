@@ -7,13 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from physics import LidarParams, NoiseParams, Pose2D, Simulation, World, load_world, raycast
+from physics import LidarParams, NoiseParams, Pose2D, Simulation, World, load_world
 from physics.simulation import cast_scans
 from physics.world import world_from_dict
 
 from conftest import SHIPPED_WORLDS, make_sim
 
 SQRT2 = math.sqrt(2.0)
+
+pytestmark = pytest.mark.usefixtures("raycast_path")  # each test in numpy, then compiled
 
 
 def beam(angle_deg: float, params: LidarParams | None = None) -> int:
@@ -199,25 +201,3 @@ def test_fast_scan_equals_reference_on_exact_corners_and_axes(arena: World) -> N
     poses = [Pose2D(x, y, theta) for x in (-2.0, 0.0, 1.5, 2.0) for y in (-2.0, 0.0, 2.0)
              for theta in (0.0, math.pi / 4, math.pi / 2, -3 * math.pi / 4)]
     assert_paths_agree(sim, poses)
-
-
-@pytest.mark.parametrize("seed", range(3))
-def test_the_dense_and_the_arc_paths_of_the_batched_cast_agree(
-        seed: int, monkeypatch: pytest.MonkeyPatch) -> None:
-    """``physics.raycast``: every beam on every shape, or only the beams of each shape's arc."""
-    world = random_world(seed, walls=80, circles=12)
-    sim = Simulation(world, seed=0)
-    poses = random_poses(world, 30, seed=seed)
-    discs = np.array([(pose.x + 0.3, pose.y, 0.11) for pose in poses])  # a robot near each
-    own = list(range(len(poses)))
-    monkeypatch.setattr(raycast, "DENSE_MAX_PAIRS", 10**9)
-    dense = sim.lidar.raw_ranges_many(poses, discs, own)
-    monkeypatch.setattr(raycast, "DENSE_MAX_PAIRS", 0)
-    arcs = sim.lidar.raw_ranges_many(poses, discs, own)
-    assert np.array_equal(np.isinf(dense), np.isinf(arcs))
-    finite = np.isfinite(dense)
-    assert np.max(np.abs(dense[finite] - arcs[finite])) <= 1e-12
-    for pose, row in zip(poses, arcs, strict=True):  # and both equal pymunk's, walls only
-        reference = sim.lidar.raw_ranges_reference(pose)
-        seen = np.isfinite(reference) & (reference <= row + 1e-9)
-        assert np.max(np.abs(row[seen] - reference[seen]), initial=0.0) <= 1e-9

@@ -179,6 +179,7 @@ def count_intersections(monkeypatch: pytest.MonkeyPatch) -> list[int]:
 
 
 @pytest.mark.parametrize("seed", range(2))
+@pytest.mark.usefixtures("numpy_raycast")  # numpy's culling of discs
 def test_a_crowds_scans_cast_nearest_first_are_the_same_to_the_bit(
         seed: int, monkeypatch: pytest.MonkeyPatch) -> None:
     """80 robots packed in the empty world (``--class 80 --arena``): most of the robots a
@@ -212,6 +213,7 @@ def test_a_crowds_scans_cast_nearest_first_are_the_same_to_the_bit(
 
 
 @pytest.mark.parametrize("seed", range(12))
+@pytest.mark.usefixtures("numpy_raycast")  # numpy's culling of discs
 def test_scattered_discs_half_hidden_cast_nearest_first_are_the_same_to_the_bit(
         seed: int, monkeypatch: pytest.MonkeyPatch) -> None:
     """``physics.raycast``: lasers among discs of every size at random, many half hidden
