@@ -675,25 +675,60 @@ class WorldSim:
 
     def _free_pose(self, pose: Pose2D, radius_m: float, skip: Collection[_Robot],
                    kept: Sequence[Disc] = ()) -> Pose2D:
-        def blocked(x: float, y: float) -> bool:
-            return self._blocked(x, y, radius_m, skip) is not None or any(
-                math.hypot(x - place.x, y - place.y) < radius_m + place.radius_m
-                for place in kept)
+        """The first candidate (``free_pose_near``'s order) clear of walls, robots and ``kept``.
 
-        if not blocked(pose.x, pose.y):
+        Each ring's candidates are tried against every robot at once (one array operation),
+        and only the ones clear of them against the walls: in a crowd (an arena's spawns)
+        most candidates fall to the robots, and the search costs a few ms, not one Python
+        comparison per robot per candidate.
+        """
+        discs = np.array([(footprint.x, footprint.y, footprint.radius_m)
+                          for footprint in (row.model.footprint for row in self._robots.values()
+                                            if row not in skip)],
+                         dtype=np.float64).reshape(-1, 3)
+        places = np.array([(place.x, place.y, place.radius_m) for place in kept],
+                          dtype=np.float64).reshape(-1, 3)
+        space = self._space.space
+
+        # a disc can touch a candidate at ``distance`` from pose only if its centre lies
+        # within radius_m + its radius of that ring (the triangle inequality; 1 um to spare)
+        ring_of_disc = np.hypot(discs[:, 0] - pose.x, discs[:, 1] - pose.y) \
+            if len(discs) else np.zeros(0)
+        reach_of_disc = discs[:, 2] + radius_m + 1e-6 if len(discs) else np.zeros(0)
+
+        def clear_of_robots(xs: FloatArray, ys: FloatArray,
+                            distance: float = 0.0) -> npt.NDArray[np.bool_]:
+            free = np.ones(len(xs), dtype=bool)
+            near = discs[np.abs(ring_of_disc - distance) < reach_of_disc]
+            if len(near):  # as ``_blocked``: the gap to each footprint at least radius_m
+                gap = np.hypot(xs[:, None] - near[None, :, 0],
+                               ys[:, None] - near[None, :, 1]) - near[None, :, 2]
+                free &= ~(gap < radius_m).any(axis=1)
+            if len(places):
+                apart = np.hypot(xs[:, None] - places[None, :, 0],
+                                 ys[:, None] - places[None, :, 1])
+                free &= ~(apart < radius_m + places[None, :, 2]).any(axis=1)
+            return free
+
+        def clear_of_walls(x: float, y: float) -> bool:
+            nearest = space.point_query_nearest((x, y), radius_m, WALLS_ONLY)
+            return nearest is None or not nearest.distance < radius_m
+
+        if clear_of_robots(np.array([pose.x]), np.array([pose.y]))[0] and \
+                clear_of_walls(pose.x, pose.y):
             return pose
         min_x, min_y, max_x, max_y = self._world.bounds
         farthest = math.hypot(max_x - min_x, max_y - min_y)
         rings = int(farthest / FREE_POSE_STEP_M) + 1
-        space = self._space.space
         for ring in range(1, rings + 1):
             distance = ring * FREE_POSE_STEP_M
             count = max(8, int(2.0 * math.pi * distance / FREE_POSE_STEP_M))
-            for k in range(count):
-                angle = 2.0 * math.pi * k / count
-                x = pose.x + distance * math.cos(angle)
-                y = pose.y + distance * math.sin(angle)
-                if blocked(x, y):
+            angles = [2.0 * math.pi * k / count for k in range(count)]
+            xs = np.array([pose.x + distance * math.cos(angle) for angle in angles])
+            ys = np.array([pose.y + distance * math.sin(angle) for angle in angles])
+            for k in np.flatnonzero(clear_of_robots(xs, ys, distance)).tolist():
+                x, y = float(xs[k]), float(ys[k])
+                if not clear_of_walls(x, y):
                     continue
                 if space.segment_query_first((pose.x, pose.y), (x, y), 0.0,
                                              WALLS_ONLY) is not None:

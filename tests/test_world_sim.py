@@ -24,7 +24,7 @@ from physics import (
     raycast,
 )
 from physics.robot import CONTACT_SKIN_M, MAX_SUBSTEP_S
-from physics.space import COLLISION_SLOP_M
+from physics.space import COLLISION_SLOP_M, WALLS_ONLY
 from physics.world import world_from_dict
 
 RADIUS_M = RobotParams().footprint_radius_m
@@ -278,6 +278,55 @@ def test_spawn_refuses_a_taken_name_a_wall_and_another_robot() -> None:
     placed = world.spawn("b")  # no pose: the start (taken by a), else the nearest free pose
     assert math.hypot(placed.x, placed.y) >= 2 * RADIUS_M
     assert math.hypot(placed.x, placed.y) < 2 * RADIUS_M + 0.06
+
+
+def first_free_one_at_a_time(world: WorldSim, pose: Pose2D, radius_m: float) -> Pose2D:
+    """``free_pose_near``'s search as it reads, one candidate and one robot at a time: each
+    candidate of each ring, in order, kept if nothing overlaps it (``WorldSim._blocked``, the
+    check a teleport makes) and no wall stands between it and ``pose``."""
+    space = world.space.space
+    if world._blocked(pose.x, pose.y, radius_m, ()) is None:
+        return pose
+    min_x, min_y, max_x, max_y = world.world.bounds
+    for ring in range(1, int(math.hypot(max_x - min_x, max_y - min_y) / 0.05) + 2):
+        distance = ring * 0.05
+        count = max(8, int(2.0 * math.pi * distance / 0.05))
+        for k in range(count):
+            angle = 2.0 * math.pi * k / count
+            x, y = pose.x + distance * math.cos(angle), pose.y + distance * math.sin(angle)
+            if world._blocked(x, y, radius_m, ()) is None and space.segment_query_first(
+                    (pose.x, pose.y), (x, y), 0.0, WALLS_ONLY) is None:
+                return Pose2D(x, y, pose.theta)
+    raise AssertionError("no free pose")
+
+
+@pytest.mark.parametrize("name", ["empty", "maze"])
+def test_a_crowds_free_places_are_the_ones_a_search_one_at_a_time_finds(name: str) -> None:
+    """Spawns without a pose pack a crowd around the start (``--class N --arena``); each
+    ring's candidates are tried against every robot at once. The same places, to the bit,
+    as trying each candidate against each robot in turn."""
+    world = WorldSim(load_world(name), seed=0)
+    rng = np.random.default_rng(7)
+    for index in range(60):
+        radius_m = float(rng.uniform(0.06, 0.2))
+        wanted = first_free_one_at_a_time(world, world.world.start, radius_m)
+        assert world.free_pose_near(world.world.start, radius_m) == wanted
+        spawned = world.spawn(f"r{index}", params=RobotParams(footprint_radius_m=radius_m))
+        assert spawned == wanted
+    probe = Pose2D(float(rng.uniform(-1, 1)), float(rng.uniform(-1, 1)), 0.3)
+    assert world.free_pose_near(probe, 0.15) == first_free_one_at_a_time(world, probe, 0.15)
+
+
+def test_three_hundred_spawns_in_one_world_never_overlap() -> None:
+    world = WorldSim(load_world("empty"), seed=0)
+    for index in range(300):
+        world.spawn(f"r{index}")
+    footprints = world.footprints()
+    gaps = np.hypot(footprints[:, None, 0] - footprints[None, :, 0],
+                    footprints[:, None, 1] - footprints[None, :, 1]) \
+        - footprints[:, None, 2] - footprints[None, :, 2]
+    np.fill_diagonal(gaps, np.inf)
+    assert gaps.min() >= 0.0, "no two footprints overlap"
 
 
 def test_delete_teleport_and_reset() -> None:
