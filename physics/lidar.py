@@ -67,7 +67,7 @@ class Lidar:
         self._params = params
         self._world_space = world_space
         self._shapes = shapes
-        raycast_kernel.kernel()  # numba's kernel loaded now (once), not on a first scan tick
+        raycast_kernel.kernel()  # the cast chosen (numba loaded) now, not on a first scan tick
         beam_angles_rad = params.angle_min_rad + np.arange(
             params.num_rays, dtype=np.float64) * params.angle_increment_rad
         self.beam_cos: FloatArray = np.cos(beam_angles_rad)
