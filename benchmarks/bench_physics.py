@@ -33,7 +33,7 @@ from importlib.metadata import version
 import numpy as np
 import numpy.typing as npt
 
-from physics import TICK_PERIOD_S, Pose2D, Simulation, World, load_world
+from physics import TICK_PERIOD_S, Pose2D, Simulation, World, load_world, raycast_kernel
 from physics.world import world_from_dict
 
 SEED = 12345
@@ -250,8 +250,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     print(f"websim physics benchmark{' (quick)' if args.quick else ''}: "
           f"{n_poses} scan poses, {n_ticks} ticks, {rtf_runs} RTF runs per figure")
+    cast = f"numba {version('numba')}" if raycast_kernel.kernel() is not None else "numpy"
     print(f"Python {platform.python_version()}, numpy {np.__version__}, "
-          f"pymunk {version('pymunk')}, {platform.platform()}\n")
+          f"pymunk {version('pymunk')}, {platform.platform()}; the LiDAR cast: {cast} "
+          f"({raycast_kernel.RAYCAST_ENV})\n")
     print(markdown_table(rows) if args.markdown else plain_table(rows))
     return 0
 
