@@ -67,7 +67,10 @@ def _compile() -> Kernel | None:
         import numba
     except ImportError:
         return None
-    jitted: Kernel = numba.njit(cache=True, nogil=True, error_model="numpy")(_cast)
+    try:
+        jitted: Kernel = numba.njit(cache=True, nogil=True, error_model="numpy")(_cast)
+    except RuntimeError:  # no cache directory it may write: compiled in every process
+        jitted = numba.njit(cache=False, nogil=True, error_model="numpy")(_cast)
     one = np.zeros((1, 2))
     jitted(np.full((1, 4), np.inf), one, np.zeros(1), np.ones(4), np.zeros(4), 0.0, 1.0, 1.0,
            one, one, one, np.ones(1), np.full(1, -1, dtype=np.intp), 1, 3.0, 1e-12)

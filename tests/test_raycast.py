@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
 import subprocess
 import sys
 from collections.abc import Callable
@@ -150,6 +151,30 @@ def test_websim_raycast_chooses_the_path_and_refuses_what_it_does_not_know(
         assert asked.returncode != 0 and "numba is not installed" in asked.stderr
     else:
         assert asked.stdout.strip() == "True", asked.stderr
+
+
+@pytest.mark.skipif(shutil.which("bwrap") is None or os.geteuid() != 0,
+                    reason="bubblewrap (bwrap, as root) is not installed: no read-only install")
+def test_the_compiled_cast_runs_from_an_install_nobody_may_write(tmp_path: Path) -> None:
+    """Every file read-only (a system install, a container's image, numba's cache directory
+    unmade): numba keeps no cache, so each process compiles its own, and casts the same."""
+    kernel()  # skips without numba
+    scan = ("from physics import Simulation, load_world, raycast_kernel;"
+            "print(raycast_kernel.kernel() is not None,"
+            " *Simulation(load_world('maze'), seed=0).scan().ranges)")
+    done = subprocess.run(
+        ["bwrap", "--ro-bind", "/", "/", "--dev", "/dev", "--proc", "/proc", "--tmpfs", "/tmp",
+         "--setenv", raycast_kernel.RAYCAST_ENV, "numba", "--setenv", "NUMBA_CACHE_DIR",
+         "/nonexistent/numba", "--setenv", "HOME", "/nonexistent", sys.executable, "-c", scan],
+        capture_output=True, text=True, timeout=300, check=False,
+        cwd=Path(__file__).resolve().parent.parent)
+    assert done.returncode == 0, done.stderr[-2000:]
+    compiled, *ranges = done.stdout.split()
+    numpy_path, *numpy_ranges = run_python(scan, "numpy", tmp_path).stdout.split()
+    assert (compiled, numpy_path) == ("True", "False")
+    assert len(ranges) == 360
+    assert np.allclose(np.array(ranges, dtype=float), np.array(numpy_ranges, dtype=float),
+                       rtol=0.0, atol=1e-9)
 
 
 @pytest.mark.parametrize("seed", range(3))
