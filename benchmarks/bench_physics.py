@@ -250,10 +250,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     print(f"websim physics benchmark{' (quick)' if args.quick else ''}: "
           f"{n_poses} scan poses, {n_ticks} ticks, {rtf_runs} RTF runs per figure")
-    cast = f"numba {version('numba')}" if raycast_kernel.kernel() is not None else "numpy"
     print(f"Python {platform.python_version()}, numpy {np.__version__}, "
-          f"pymunk {version('pymunk')}, {platform.platform()}; the LiDAR cast: {cast} "
-          f"({raycast_kernel.RAYCAST_ENV})\n")
+          f"pymunk {version('pymunk')}, {platform.platform()}; the LiDAR cast: "
+          f"{raycast_kernel.chosen()} ({raycast_kernel.RAYCAST_ENV})\n")
     print(markdown_table(rows) if args.markdown else plain_table(rows))
     return 0
 

@@ -38,7 +38,7 @@ from importlib.metadata import version
 
 import numpy as np
 
-from physics import LidarParams, Pose2D, World, WorldSim, load_world
+from physics import LidarParams, Pose2D, World, WorldSim, load_world, raycast_kernel
 from physics.world import world_from_dict
 
 HALF_M = 10.0
@@ -150,7 +150,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--search-max", type=int, default=3200)
     args = parser.parse_args(argv)
     print(f"websim world benchmark: Python {platform.python_version()}, numpy "
-          f"{np.__version__}, pymunk {version('pymunk')}, {platform.platform()}")
+          f"{np.__version__}, pymunk {version('pymunk')}, {platform.platform()}; the LiDAR "
+          f"cast: {raycast_kernel.chosen()} ({raycast_kernel.RAYCAST_ENV})")
     print(f"{'world':<6} {'robots':>6} {'scans':>5} {'RTF':>8} {'rays/s':>10} "
           f"{'step ms':>8} {'pass ms':>8}")
     for kind in args.worlds:

@@ -61,6 +61,14 @@ def kernel() -> Kernel | None:
     return _loaded[0]
 
 
+def chosen() -> str:
+    """Which cast this process uses, for a benchmark's header: ``numba 0.61.0`` or ``numpy``."""
+    if kernel() is None:
+        return "numpy"
+    import numba
+    return f"numba {numba.__version__}"
+
+
 def _compile() -> Kernel | None:
     """``_cast`` compiled and called once (numba compiles, or loads its cache, on a first call)."""
     try:
