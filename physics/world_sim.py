@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+import pymunk
 
 from physics.command_pipeline import AT_REST, drive
 from physics.frames import map_to_odom
@@ -710,12 +711,8 @@ class WorldSim:
                 free &= ~(apart < radius_m + places[None, :, 2]).any(axis=1)
             return free
 
-        def clear_of_walls(x: float, y: float) -> bool:
-            nearest = space.point_query_nearest((x, y), radius_m, WALLS_ONLY)
-            return nearest is None or not nearest.distance < radius_m
-
         if clear_of_robots(np.array([pose.x]), np.array([pose.y]))[0] and \
-                clear_of_walls(pose.x, pose.y):
+                self._wall_within(pose.x, pose.y, radius_m) is None:
             return pose
         min_x, min_y, max_x, max_y = self._world.bounds
         farthest = math.hypot(max_x - min_x, max_y - min_y)
@@ -728,7 +725,7 @@ class WorldSim:
             ys = np.array([pose.y + distance * math.sin(angle) for angle in angles])
             for k in np.flatnonzero(clear_of_robots(xs, ys, distance)).tolist():
                 x, y = float(xs[k]), float(ys[k])
-                if not clear_of_walls(x, y):
+                if self._wall_within(x, y, radius_m) is not None:
                     continue
                 if space.segment_query_first((pose.x, pose.y), (x, y), 0.0,
                                              WALLS_ONLY) is not None:
@@ -743,8 +740,8 @@ class WorldSim:
 
         The robots of ``skip`` are not there.
         """
-        nearest = self._space.space.point_query_nearest((x, y), radius_m, WALLS_ONLY)
-        if nearest is not None and nearest.distance < radius_m:
+        nearest = self._wall_within(x, y, radius_m)
+        if nearest is not None:
             shapes = (*self._space.wall_shapes, *self._space.circle_shapes)
             origins = [wall.origin for wall in self._world.walls] + \
                 [disc.origin for disc in self._world.circles]
@@ -760,6 +757,11 @@ class WorldSim:
                 return (f"{max(gap, 0.0):.3f} m from robot '{other.name}'; it needs "
                         f"{radius_m} m of clearance")
         return None
+
+    def _wall_within(self, x: float, y: float, radius_m: float) -> pymunk.PointQueryInfo | None:
+        """The nearest wall or obstacle closer to (x, y) than ``radius_m``, or None."""
+        nearest = self._space.space.point_query_nearest((x, y), radius_m, WALLS_ONLY)
+        return nearest if nearest is not None and nearest.distance < radius_m else None
 
     def _check_clear(self, x: float, y: float, radius_m: float, moving: _Robot | None,
                      where: str, what: str) -> None:
