@@ -140,12 +140,17 @@ def test_websim_raycast_chooses_the_path_and_refuses_what_it_does_not_know(
     which = "from physics import raycast_kernel; print(raycast_kernel.kernel() is not None)"
     assert run_python(which, None, tmp_path).stdout.strip() == "False"
     assert run_python(which, "numpy", tmp_path).stdout.strip() == "False"
-    bogus = run_python("from websim.cli import main; raise SystemExit(main(['serve', "
-                       "'--http-port', '1', '--ws-port', '1']))", "fortran", tmp_path)
-    assert bogus.returncode == 2, bogus.stderr
-    assert "websim: error: WEBSIM_RAYCAST='fortran': expected one of numpy, numba" in \
-        bogus.stderr
-    assert "Traceback" not in bogus.stderr
+    solution = Path(__file__).resolve().parent.parent / "examples/solutions/heading_pid.py"
+    for command in (["serve", "--http-port", "1", "--ws-port", "1"],
+                    ["grade", "heading_pid", "--out", str(tmp_path / "reports"), "--submission",
+                     str(solution.parent), "--", sys.executable, solution.name]):
+        bogus = run_python(f"from websim.cli import main; raise SystemExit(main({command!r}))",
+                           "fortran", tmp_path)
+        assert bogus.returncode == 2, bogus.stderr  # an error, not a submission's 0
+        assert "websim: error: WEBSIM_RAYCAST='fortran': expected one of numpy, numba" in \
+            bogus.stderr
+        assert "Traceback" not in bogus.stderr
+    assert not (tmp_path / "reports").exists(), "nothing was graded"
     asked = run_python(which, "NumBa ", tmp_path)
     if compiled_raycast() is None:
         assert asked.returncode != 0 and "numba is not installed" in asked.stderr
