@@ -168,9 +168,10 @@ def test_the_compiled_cast_runs_from_an_install_nobody_may_write(tmp_path: Path)
             "print(raycast_kernel.kernel() is not None,"
             " *Simulation(load_world('maze'), seed=0).scan().ranges)")
     done = subprocess.run(
-        ["bwrap", "--ro-bind", "/", "/", "--dev", "/dev", "--proc", "/proc", "--tmpfs", "/tmp",
-         "--setenv", raycast_kernel.RAYCAST_ENV, "numba", "--setenv", "NUMBA_CACHE_DIR",
-         "/nonexistent/numba", "--setenv", "HOME", "/nonexistent", sys.executable, "-c", scan],
+        ["bwrap", "--ro-bind", "/", "/", "--dev", "/dev", "--proc", "/proc",
+         "--setenv", raycast_kernel.RAYCAST_ENV, "numba",
+         "--setenv", "NUMBA_CACHE_DIR", "/nonexistent/numba", "--setenv", "HOME", "/nonexistent",
+         sys.executable, "-c", scan],
         capture_output=True, text=True, timeout=300, check=False,
         cwd=Path(__file__).resolve().parent.parent)
     assert done.returncode == 0, done.stderr[-2000:]

@@ -13,6 +13,7 @@ import sys
 import tempfile
 import textwrap
 import threading
+import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -33,6 +34,7 @@ from websim.sandbox.identity import FIRST_UID, UID_COUNT
 from websim.sandbox.limits import CPU_KILL_GRACE_S, MIB
 from websim.sandbox.mounts import controller_environment, visible_paths
 from websim.sandbox.outcome import Observed, size_text
+from websim.sandbox.sandbox import READY_TEXT, SERVER_STOP_TIMEOUT_S
 from websim.sandbox.submission import SubmissionRefusedError
 from websim.sandbox.watch import SAMPLE_PERIOD_S, usage
 
@@ -187,6 +189,42 @@ def test_two_sandboxes_run_at_once_on_the_same_ports(tmp_path: Path) -> None:
     maze, corridor = reports["maze"], reports["corridor"]
     assert maze["started"] < corridor["ended"] and corridor["started"] < maze["ended"], \
         "the two controllers did not run at the same time"
+
+
+FINISHING_SIMULATOR = """
+import signal, sys, time
+from pathlib import Path
+signal.signal(signal.SIGTERM, lambda *_: sys.exit(15))  # cut short: exits 15, no record
+print("{ready}", flush=True)
+time.sleep(0.5)  # the run ends; its record takes a while to write
+time.sleep(float(sys.argv[2]))
+Path(sys.argv[1]).write_text("the whole record")
+"""
+
+
+@needs_sandbox
+@pytest.mark.parametrize("ending", [True, False])
+def test_a_simulator_that_ended_its_run_is_let_finish_its_record(tmp_path: Path,
+                                                                 ending: bool) -> None:
+    """A graded run's simulator ends the run itself, then writes its record (truth.json's
+    notes, the recording's end) while it exits; the controller may be gone before that. The
+    grader waits for a simulator that is ending (``stop_server(ending=True)``: its run.json is
+    written) before any SIGTERM, which would cut the record short; one that is not ending is
+    stopped at once."""
+    record = tmp_path / "record.txt"
+    script = tmp_path / "simulator.py"
+    script.write_text(FINISHING_SIMULATOR.replace("{ready}", READY_TEXT))
+    folder = submission(tmp_path / "alice", "print('done')")
+    with SubmissionSandbox(folder, limits=SandboxLimits(wall_time_s=GENEROUS_WALL_S)) as box:
+        box.start_server([sys.executable, str(script), str(record), "1.5"], env=server_env())
+        assert box.run_controller(["python3", "main.py"]).exit_code == 0
+        started = time.monotonic()
+        outcome = box.stop_server(ending=ending)
+    if ending:
+        assert outcome.exit_code == 0 and record.read_text() == "the whole record"
+        assert time.monotonic() - started < SERVER_STOP_TIMEOUT_S
+    else:
+        assert outcome.exit_code == 15 and not record.exists()
 
 
 RCLPY_CLIENT = """

@@ -319,7 +319,7 @@ def grade_run(suite_path: Path, scenario: Scenario, command: Sequence[str],
             return _write(out, _grader_error(scenario, options, f"{error}"))
         controller = sandbox.run_controller(
             command, env={**controller_environment(scenario), **ros_env})
-        server = sandbox.stop_server()
+        server = sandbox.stop_server(ending=(out / RUN_FILE).is_file())  # it ended the run
     wall_s = time.monotonic() - started
     report, trajectory = score_run(
         scenario, out, options, controller=asdict_controller(controller),

@@ -367,14 +367,21 @@ class SubmissionSandbox:
         if not self._privileged:  # its network namespace belongs to its user namespace
             self._userns_fd = os.open(f"/proc/{pid}/ns/user", os.O_RDONLY | os.O_CLOEXEC)
 
-    def stop_server(self, *, timeout_s: float = SERVER_STOP_TIMEOUT_S) -> ServerOutcome:
+    def stop_server(self, *, timeout_s: float = SERVER_STOP_TIMEOUT_S,
+                    ending: bool = False) -> ServerOutcome:
         """Stop the simulator (SIGTERM, then SIGKILL after ``timeout_s``); how it ended.
 
-        Idempotent: without a simulator, an outcome with no exit code.
+        ``ending``: the simulator is stopping on its own (its run is over, and it is writing
+        its record and closing its recording): it gets ``timeout_s`` to exit before the
+        SIGTERM, which would otherwise cut those writes short. Idempotent: without a
+        simulator, an outcome with no exit code.
         """
         server, output = self._server, self._server_output
         if server is None or output is None:
             return ServerOutcome(None, "")
+        if ending:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                server.wait(timeout_s)
         if server.poll() is None:
             try:
                 if self._server_pidfd is not None:
