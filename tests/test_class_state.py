@@ -181,7 +181,13 @@ async def drive_all(ws_port: int, tokens: dict[str, str], seconds: float) -> Non
                 await ws.send(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": twist}))
                 await asyncio.sleep(0.1)
 
-    await asyncio.gather(*(drive(index, name) for index, name in enumerate(tokens)))
+    # every driver ends before the first failure is raised: none is left behind to be
+    # destroyed with its loop (a server killed mid-drive fails them all)
+    ended = await asyncio.gather(*(drive(index, name) for index, name in enumerate(tokens)),
+                                 return_exceptions=True)
+    failures = [result for result in ended if isinstance(result, BaseException)]
+    if failures:
+        raise failures[0]
 
 
 async def poses(ws_port: int, names: list[str]) -> dict[str, tuple[float, float, float]]:
