@@ -27,6 +27,9 @@ seconds more, per setup:
   commands lost (unanswered after 1 s, not superseded by a later one of the same driver);
 * /odom stamp→receipt p99 (wall clock of this host: the fan-out delay without the tick wait);
 * tick jitter p99 (/healthz, worst robot or process), ticks missed, scans shed;
+* the server's part of the latency: how long after its step began a robot's /odom and /tf
+  were handed to its clients (/healthz ``tick_delivery_p99_ms``: the robots stepped before it,
+  in a world of one robot its scan), p99 of the worst robot and of the median one;
 * server CPU (% of one core; the sum over processes), server peak RSS (the sum of the
   processes' peaks) and PSS at the end (shared pages counted once), and this client
   process's CPU (it competes with the server on a small machine: near 100 % the figures
@@ -524,6 +527,10 @@ async def window(setup: Setup, clients: list[Client], drivers: list[Driver],
         "superseded": sum(driver.superseded for driver in drivers) - superseded_before,
         "stamp_to_receipt_p99_ms": percentile(stamp_ms, 99),
         "jitter_p99_ms": max(float(report["tick_jitter_p99_ms"]) for report in after),
+        "delivery_p99_worst_ms": max(float(report.get("tick_delivery_p99_ms", "nan"))
+                                     for report in after),
+        "delivery_p99_median_ms": percentile(
+            [float(report.get("tick_delivery_p99_ms", "nan")) for report in after], 50),
         "missed_ticks": max(int(report["ticks_due"]) - int(report["ticks"])
                             for report in after),
         "scans_shed": sum(int(a["scans_shed"]) - int(b["scans_shed"])
@@ -574,6 +581,8 @@ FIGURES: tuple[tuple[str, str, str, str], ...] = (
      "{:.1f} / {latency_samples} / {lost}", "lost"),
     ("/odom stamp->receipt p99 (ms)", "stamp_to_receipt_p99_ms", "{:.1f}", ""),
     ("tick jitter p99, worst (ms)", "jitter_p99_ms", "{:.2f}", ""),
+    ("server: /odom out after its step, p99 worst / median robot (ms)",
+     "delivery_p99_worst_ms", "{:.1f} / {delivery_p99_median_ms:.1f}", ""),
     ("ticks missed / scans shed / closed", "missed_ticks", "{} / {scans_shed} / {closed}", ""),
     ("server CPU (% of one core, total)", "server_cpu_pct", "{:.0f}", ""),
     ("server RSS peak, total (MB)", "rss_mb", "{:.1f}", "rss"),
@@ -631,25 +640,36 @@ polylines:
 class in it, placed by the server so that no two footprints overlap."""
 
 
+def server_args(args: argparse.Namespace) -> list[str]:
+    """What every server of this run is started with beyond its setup's own arguments."""
+    return ["--event-loop", args.event_loop] if args.event_loop else []
+
+
 def run_setup(kind: str, n_robots: int, seconds: float, warmup_s: float,
-              log_dir: Path, workers: int = 2) -> dict[str, Any]:
-    """Start the servers of one setup, measure, stop them; a failure is a row with ``error``."""
+              log_dir: Path, workers: int = 2,
+              server_args: Sequence[str] = ()) -> dict[str, Any]:
+    """Start the servers of one setup, measure, stop them; a failure is a row with ``error``.
+
+    ``server_args`` are added to every server's command line (``--event-loop``).
+    """
     budget_s = 2 * CONNECT_TIMEOUT_S + warmup_s + seconds + 30.0
     with contextlib.ExitStack() as stack:
         try:
             if kind == "one process":
-                server = stack.enter_context(running_server(log_dir, ["--class", str(n_robots)]))
+                server = stack.enter_context(running_server(
+                    log_dir, ["--class", str(n_robots), *server_args]))
                 setup = class_setup(server)
             elif kind == "arena":
                 world = log_dir / "arena.yaml"
                 world.write_text(ARENA_WORLD)
                 server = stack.enter_context(running_server(
-                    log_dir, ["--class", str(n_robots), "--arena", "--world", str(world)]))
+                    log_dir, ["--class", str(n_robots), "--arena", "--world", str(world),
+                              *server_args]))
                 setup = class_setup(server)
             elif kind == "workers":
                 http_port, ws_port = free_port(), free_port()
                 args = ["--class", str(n_robots), "--worker", "--public-ws-port", str(ws_port),
-                        "--max-robots", str(n_robots)]
+                        "--max-robots", str(n_robots), *server_args]
                 with concurrent.futures.ThreadPoolExecutor(STARTERS) as pool:
                     starting = [pool.submit(stack.enter_context, running_server(log_dir, args))
                                 for _ in range(workers)]
@@ -660,7 +680,8 @@ def run_setup(kind: str, n_robots: int, seconds: float, warmup_s: float,
                 setup.proxy_pids.append(nginx.pid)
             else:
                 with concurrent.futures.ThreadPoolExecutor(STARTERS) as pool:
-                    starting = [pool.submit(stack.enter_context, running_server(log_dir))
+                    starting = [pool.submit(stack.enter_context,
+                                            running_server(log_dir, server_args))
                                 for _ in range(n_robots)]
                     servers = [future.result() for future in starting]
                 setup = separate_setup(servers)
@@ -699,7 +720,8 @@ def search(results: dict[tuple[str, int], dict[str, Any]], args: argparse.Namesp
             print(f"searching: one process, {n_robots} robots ...", file=sys.stderr,
                   flush=True)
             results["one process", n_robots] = run_setup(
-                "one process", n_robots, args.seconds, args.warmup, log_dir)
+                "one process", n_robots, args.seconds, args.warmup, log_dir,
+                server_args=server_args(args))
             emit(results["one process", n_robots])
         return results["one process", n_robots]
 
@@ -736,6 +758,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--arena", action="store_true",
                         help="also measure one `websim serve --class N --arena` (every robot "
                              "in one 20 x 20 m world: they see each other) for every N")
+    parser.add_argument("--event-loop", choices=("uvloop", "asyncio"), default=None,
+                        help="the servers' event loop (default: websim serve's)")
     parser.add_argument("--json", action="store_true", help="print rows as JSON objects")
     args = parser.parse_args(argv)
     if any(n < 1 for n in args.robots) or args.search_max < 1:
@@ -757,7 +781,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         for kind, n_robots in plan:
             print(f"measuring {kind}, {n_robots} robots ...", file=sys.stderr, flush=True)
             results[kind, n_robots] = run_setup(kind, n_robots, args.seconds, args.warmup,
-                                                Path(log_dir), args.workers)
+                                                Path(log_dir), args.workers,
+                                                server_args(args))
             emit(results[kind, n_robots])
         held: int | None = None
         if args.search:

@@ -229,6 +229,8 @@ class ClassServer(WebSocketFront):
             "queued_bytes": sum(report["queued_bytes"] for report in robots.values()),
             "tick_jitter_p99_ms": max((report["tick_jitter_p99_ms"]
                                        for report in robots.values()), default=0.0),
+            "tick_delivery_p99_ms": max((report["tick_delivery_p99_ms"]
+                                         for report in robots.values()), default=0.0),
             "robots": robots,
         }
         if not full:

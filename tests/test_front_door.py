@@ -46,6 +46,7 @@ def test_public_healthz_has_counts_only_and_the_token_adds_names_and_says_it_is_
         public = json.loads(body)
         assert public["status"] == "ok" and public["robot_count"] == 3
         assert "clients" in public and "tick_jitter_p99_ms" in public
+        assert "tick_delivery_p99_ms" in public
         assert "robots" not in public and "degraded_robots" not in public
         assert "robot01" not in body.decode()
         assert public["token_accepted"] is False

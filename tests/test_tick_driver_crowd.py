@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import logging
+import random
 from typing import Any
 
 import pytest
@@ -125,3 +126,66 @@ def test_a_world_of_one_robot_keeps_one_write_per_client_per_tick() -> None:
         assert all(count == 1 for count in written.writes.values())
     scans = sum(topic == SCAN.name for written in ticks for _, topic in written.frames)
     assert scans == 2 * len(clients)
+
+
+def test_health_reports_when_each_robots_odom_left_after_its_step_began() -> None:
+    """/healthz ``tick_delivery_p99_ms``: the server's part of a command's latency. Each
+    client's write here takes 1 ms of the clock, so the k-th robot of a crowded world hands
+    its /odom and /tf over k ms after the step (its scans, later, are not counted)."""
+    clock = ManualClock()
+    arena = WorldHost(WorldSim(load_world("empty"), seed=0))
+    worlds, _ = driven_robots(arena, 5, clock)
+    driver = TickDriver(clock=clock)
+    written = Written()
+
+    def slow_write(flush: Flush) -> None:
+        for session in (*flush.now, *flush.later):
+            if len(session.outbox):
+                clock.advance(0.001)
+        written.write(flush)
+
+    driver.write = slow_write  # type: ignore[method-assign]  # no sockets here
+    for _ in range(6):
+        clock.advance(TICK_S)
+        driver.tick(worlds)
+    assert SCAN.name in {topic for _, topic in written.frames}
+    for index, (_, host) in enumerate(arena):
+        health = host.health()
+        assert health["tick_delivery_p99_ms"] == pytest.approx(index + 1.0, abs=1e-6), index
+        assert len(host.stats.delivery_s) == 6
+
+
+def test_a_throttled_watcher_of_a_crowded_world_gets_every_fourth_odom_however_long_writes_take(
+        ) -> None:
+    """The instructor's dashboard watches every robot's /odom at 200 ms (every fourth tick).
+    A robot late in a crowded world's order hands its messages over up to many ms after the
+    step began, more on some ticks than on others; its throttle counts from when the tick was
+    due, so no fourth tick is skipped (it was: 96-97 % delivered in bench_class --arena)."""
+    clock = ManualClock()
+    arena = WorldHost(WorldSim(load_world("empty"), seed=0))
+    worlds, _ = driven_robots(arena, 5, clock)
+    last = list(arena)[-1][1]
+    dashboard = Session("dashboard", True, clock=clock, namespace="/r4")
+    last.bridge.connect(dashboard)
+    last.bridge.handle(dashboard, json.dumps({"op": "subscribe", "topic": ODOM.name,
+                                              "throttle_rate": 200}))
+    driver = TickDriver(clock=clock)
+    costs_s = random.Random(7)
+    seen: list[int] = []
+    tick = [0]
+
+    def slow_write(flush: Flush) -> None:
+        for session in (*flush.now, *flush.later):
+            frames = session.outbox.take(1 << 30)
+            if session is dashboard and frames:
+                seen.append(tick[0])
+            if frames:
+                clock.advance(costs_s.uniform(0.0, 0.004))  # 0-4 ms a write
+
+    driver.write = slow_write  # type: ignore[method-assign]  # no sockets here
+    started_s = clock.monotonic_s()
+    for tick[0] in range(40):  # due every 50 ms, as the server's schedule; late if writes ran on
+        due_s = started_s + TICK_S * (tick[0] + 1)
+        clock.advance(max(0.0, due_s - clock.monotonic_s()))
+        driver.tick(worlds, clock.monotonic_s() - due_s)
+    assert seen == list(range(seen[0], 40, 4)), seen
