@@ -640,7 +640,7 @@ polylines:
 class in it, placed by the server so that no two footprints overlap."""
 
 
-def server_args(args: argparse.Namespace) -> list[str]:
+def extra_server_args(args: argparse.Namespace) -> list[str]:
     """What every server of this run is started with beyond its setup's own arguments."""
     return ["--event-loop", args.event_loop] if args.event_loop else []
 
@@ -721,7 +721,7 @@ def search(results: dict[tuple[str, int], dict[str, Any]], args: argparse.Namesp
                   flush=True)
             results["one process", n_robots] = run_setup(
                 "one process", n_robots, args.seconds, args.warmup, log_dir,
-                server_args=server_args(args))
+                server_args=extra_server_args(args))
             emit(results["one process", n_robots])
         return results["one process", n_robots]
 
@@ -782,7 +782,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"measuring {kind}, {n_robots} robots ...", file=sys.stderr, flush=True)
             results[kind, n_robots] = run_setup(kind, n_robots, args.seconds, args.warmup,
                                                 Path(log_dir), args.workers,
-                                                server_args(args))
+                                                extra_server_args(args))
             emit(results[kind, n_robots])
         held: int | None = None
         if args.search:

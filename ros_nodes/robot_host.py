@@ -14,10 +14,11 @@ nothing is shed.
 
 from __future__ import annotations
 
+import heapq
 import logging
 import math
 from collections import deque
-from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -120,12 +121,18 @@ class TickStats:
         return p99_ms(self.delivery_s)
 
 
-def p99_ms(samples_s: Iterable[float]) -> float:
-    """The 99th percentile of ``samples_s`` (s) in ms; 0 if there are none."""
-    samples = sorted(samples_s)
-    if not samples:
+def p99_ms(samples_s: Collection[float]) -> float:
+    """The 99th percentile of ``samples_s`` (s) in ms; 0 if there are none.
+
+    The sorted samples' element at 99 % of their count, found among the largest few
+    (``heapq.nlargest``: a public /healthz of a class reads two per robot, and sorting them
+    all cost 155 µs a robot).
+    """
+    count = len(samples_s)
+    if not count:
         return 0.0
-    return 1000.0 * samples[min(len(samples) - 1, int(0.99 * len(samples)))]
+    index = min(count - 1, int(0.99 * count))
+    return 1000.0 * heapq.nlargest(count - index, samples_s)[-1]
 
 
 class RobotHost:

@@ -19,6 +19,7 @@ import pytest
 
 from heartbeat.driver import TickDriver
 from physics import Simulation, WorldSim, load_world
+from ros_nodes.robot_host import p99_ms
 from ros_nodes.robot_interface import ODOM, SCAN, TF
 from ros_nodes.virtual_robot_core import VirtualRobot
 from ros_nodes.world_host import WorldHost
@@ -189,3 +190,15 @@ def test_a_throttled_watcher_of_a_crowded_world_gets_every_fourth_odom_however_l
         clock.advance(max(0.0, due_s - clock.monotonic_s()))
         driver.tick(worlds, clock.monotonic_s() - due_s)
     assert seen == list(range(seen[0], 40, 4)), seen
+
+
+@pytest.mark.parametrize("count", [0, 1, 2, 99, 100, 101, 1199, 1200])
+def test_the_p99_of_healthz_is_the_sorted_samples_element_at_99_percent(count: int) -> None:
+    """``p99_ms`` finds it among the largest few, not by sorting all (a public /healthz of
+    a class reads two per robot); it is the same element, ties and all."""
+    draw = random.Random(count)
+    for _ in range(20):
+        samples = [draw.choice([0.001, 0.002, draw.random()]) for _ in range(count)]
+        expected = 0.0 if not samples else \
+            1000.0 * sorted(samples)[min(count - 1, int(0.99 * count))]
+        assert p99_ms(samples) == expected
